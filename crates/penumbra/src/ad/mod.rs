@@ -1,0 +1,191 @@
+//! Automatic differentiation: the [`Real`] number trait that all
+//! differentiable code is generic over.
+//!
+//! Rendering code (BSDFs, textures, emitters, hit re-evaluation,
+//! integrators) is written once, generic over `R: Real`:
+//! - `f32` renders the primal image;
+//! - [`Dual`] carries one tangent direction (forward mode);
+//! - a local reverse-mode variable (path replay) records only the terms
+//!   of one path vertex.
+//!
+//! Parameters enter through [`Real::from_param`], so that seeding a tangent
+//! (forward mode) or tagging a leaf for scattering (reverse mode) happens in
+//! one place: the parameter store's `read`.
+
+mod dual;
+
+pub use dual::Dual;
+
+use crate::params::{ParamId, ParamStore};
+use std::fmt::Debug;
+use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A real number that rendering code computes with.
+///
+/// Comparisons and branch decisions are made on the primal value
+/// ([`Real::val`]): derivatives never change which branch a sample takes.
+pub trait Real:
+    Copy
+    + Debug
+    + Default
+    + Send
+    + Sync
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + Add<f32, Output = Self>
+    + Sub<f32, Output = Self>
+    + Mul<f32, Output = Self>
+    + Div<f32, Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+    + DivAssign
+{
+    /// A constant: its derivative is zero.
+    fn cst(v: f32) -> Self;
+    /// The primal value, detached from any derivative.
+    fn val(self) -> f32;
+    /// Element `index` of parameter `id`, read from `store`: the one place
+    /// where derivatives are seeded (forward) or tagged (reverse).
+    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self;
+
+    fn sqrt(self) -> Self;
+    fn exp(self) -> Self;
+    fn ln(self) -> Self;
+    fn sin(self) -> Self;
+    fn cos(self) -> Self;
+    fn tan(self) -> Self;
+    fn acos(self) -> Self;
+    fn asin(self) -> Self;
+    fn atan2(self, x: Self) -> Self;
+    /// `self^e` for a constant exponent.
+    fn powf(self, e: f32) -> Self;
+    fn abs(self) -> Self;
+    fn recip(self) -> Self {
+        Self::cst(1.0) / self
+    }
+    /// `sqrt(max(self, 0))`: the safe square root of quantities that are
+    /// non-negative up to rounding.
+    fn safe_sqrt(self) -> Self {
+        if self.val() > 0.0 {
+            self.sqrt()
+        } else {
+            Self::cst(0.0)
+        }
+    }
+    /// `self^e` for a differentiable exponent (self > 0).
+    fn pow(self, e: Self) -> Self {
+        (self.ln() * e).exp()
+    }
+    fn sqr(self) -> Self {
+        self * self
+    }
+    /// The smaller of the two; its derivative is the chosen operand's.
+    fn min(self, o: Self) -> Self {
+        if o.val() < self.val() {
+            o
+        } else {
+            self
+        }
+    }
+    /// The larger of the two; its derivative is the chosen operand's.
+    fn max(self, o: Self) -> Self {
+        if o.val() > self.val() {
+            o
+        } else {
+            self
+        }
+    }
+    fn clamp(self, lo: f32, hi: f32) -> Self {
+        let v = self.val();
+        if v < lo {
+            Self::cst(lo)
+        } else if v > hi {
+            Self::cst(hi)
+        } else {
+            self
+        }
+    }
+    fn is_finite(self) -> bool {
+        self.val().is_finite()
+    }
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn cst(v: f32) -> Self {
+        v
+    }
+    #[inline(always)]
+    fn val(self) -> f32 {
+        self
+    }
+    #[inline(always)]
+    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
+        store.value(id, index)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f32::sqrt(self)
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        f32::exp(self)
+    }
+    #[inline(always)]
+    fn ln(self) -> Self {
+        f32::ln(self)
+    }
+    #[inline(always)]
+    fn sin(self) -> Self {
+        f32::sin(self)
+    }
+    #[inline(always)]
+    fn cos(self) -> Self {
+        f32::cos(self)
+    }
+    #[inline(always)]
+    fn tan(self) -> Self {
+        f32::tan(self)
+    }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        f32::acos(self.clamp(-1.0, 1.0))
+    }
+    #[inline(always)]
+    fn asin(self) -> Self {
+        f32::asin(self.clamp(-1.0, 1.0))
+    }
+    #[inline(always)]
+    fn atan2(self, x: Self) -> Self {
+        f32::atan2(self, x)
+    }
+    #[inline(always)]
+    fn powf(self, e: f32) -> Self {
+        f32::powf(self, e)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn pow(self, e: Self) -> Self {
+        f32::powf(self, e)
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        f32::min(self, o)
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        f32::max(self, o)
+    }
+    #[inline(always)]
+    fn clamp(self, lo: f32, hi: f32) -> Self {
+        f32::clamp(self, lo, hi)
+    }
+}

@@ -1,0 +1,117 @@
+//! Rays, hits and surface interactions.
+
+use crate::ad::Real;
+use crate::math::{Frame, RAY_EPSILON, V2, V3};
+use glam::{Vec2, Vec3};
+
+/// A ray with unit direction, valid on `(tmin, tmax)`.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl Ray {
+    pub fn new(o: Vec3, d: Vec3) -> Ray {
+        Ray {
+            o,
+            d,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        }
+    }
+    #[inline(always)]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.o + self.d * t
+    }
+}
+
+/// What the acceleration structure reports: which primitive was hit, where
+/// along the ray, and the primitive's own surface coordinates (barycentrics
+/// `(b1, b2)` for triangles). Everything else is re-evaluated, in `R`, by
+/// the shape (so that geometry derivatives flow).
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub t: f32,
+    pub shape: u32,
+    pub prim: u32,
+    pub uv: Vec2,
+}
+
+/// A point on a surface with its local differential geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction<R> {
+    /// Distance along the ray.
+    pub t: R,
+    pub p: V3<R>,
+    /// Geometric normal (unit), oriented as the shape defines it (not
+    /// flipped towards the ray).
+    pub n: V3<R>,
+    /// Shading frame (shading normal in `sh_frame.n`).
+    pub sh_frame: Frame<R>,
+    pub uv: V2<R>,
+    /// Direction towards the ray origin, in the shading frame.
+    pub wi: V3<R>,
+    pub shape: u32,
+    pub prim: u32,
+}
+
+impl<R: Real> SurfaceInteraction<R> {
+    #[inline(always)]
+    pub fn to_world(&self, v: V3<R>) -> V3<R> {
+        self.sh_frame.to_world(v)
+    }
+    #[inline(always)]
+    pub fn to_local(&self, v: V3<R>) -> V3<R> {
+        self.sh_frame.to_local(v)
+    }
+
+    /// Origin offset for rays leaving the surface towards `d` (side chosen
+    /// by the geometric normal), scaled with the position's magnitude.
+    #[inline(always)]
+    pub fn offset_origin(&self, d: Vec3) -> Vec3 {
+        let p = self.p.val();
+        let n = self.n.val();
+        let mag = (1.0 + p.abs().max_element()) * RAY_EPSILON;
+        if n.dot(d) >= 0.0 {
+            p + n * mag
+        } else {
+            p - n * mag
+        }
+    }
+
+    /// A ray leaving the surface in world direction `d`.
+    #[inline(always)]
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        Ray::new(self.offset_origin(d), d)
+    }
+
+    /// A shadow ray from the surface to point `target` (stops just short).
+    #[inline(always)]
+    pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
+        let o = self.offset_origin(target - self.p.val());
+        let d = target - o;
+        let dist = d.length();
+        Ray {
+            o,
+            d: d / dist,
+            tmin: 0.0,
+            tmax: dist * (1.0 - 1e-4),
+        }
+    }
+}
+
+/// A point sampled on a surface (for emitter sampling). Sampling is
+/// detached: the point, normal and density are constants.
+#[derive(Clone, Copy, Debug)]
+pub struct PositionSample {
+    pub p: Vec3,
+    /// Unit surface normal at `p` (oriented as the shape defines it).
+    pub n: Vec3,
+    pub uv: Vec2,
+    /// Density with respect to surface area.
+    pub pdf: f32,
+    pub prim: u32,
+}

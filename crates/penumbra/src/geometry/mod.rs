@@ -1,0 +1,11 @@
+//! Shapes, meshes, the acceleration structure, and hit re-evaluation.
+//!
+//! Traversal is plain f32; after the acceleration structure reports a
+//! [`Hit`], the shape re-evaluates the hit in `R` from its parameters
+//! (vertex positions, centre, radius), so geometry derivatives can flow.
+
+mod interaction;
+pub mod shape;
+
+pub use interaction::{Hit, PositionSample, Ray, SurfaceInteraction};
+pub use shape::{Shape, ShapeT};

@@ -1,0 +1,17 @@
+//! Penumbra: a physics-based differentiable Monte Carlo renderer.
+//!
+//! See `DESIGN.md` in the repository for the architecture and the
+//! mathematics (interior vs boundary derivatives, detached sampling, path
+//! replay) that the code follows.
+
+pub mod ad;
+pub mod bsdf;
+pub mod emitter;
+pub mod error;
+pub mod geometry;
+pub mod math;
+pub mod params;
+pub mod scene;
+pub mod texture;
+
+pub use error::{Error, Result};

@@ -1,0 +1,115 @@
+//! The texture family: spatially varying reflectance, roughness, radiance.
+//! Texel data lives in the parameter store (`<key>.data`, shape
+//! `[h, w, c]`), uniform values in `<key>.value`.
+
+mod uniform;
+
+pub use uniform::Uniform;
+
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::Spectrum;
+use crate::params::{Domain, ParamStore};
+use crate::scene::{LoadContext, Node, Value};
+
+/// What every texture plugin provides.
+pub trait TextureT {
+    /// RGB value at the interaction's uv.
+    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    /// Scalar value at the interaction's uv (first channel, or the
+    /// luminance-free mean for RGB data, as Mitsuba's `eval_1`).
+    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R;
+    /// Mean over the texture (for sampling heuristics), primal only.
+    fn mean(&self, store: &ParamStore) -> f32;
+    /// Largest value over the texture, primal only.
+    fn max(&self, store: &ParamStore) -> f32;
+}
+
+/// All texture plugins.
+#[derive(Clone, Debug)]
+pub enum Texture {
+    Uniform(Uniform),
+}
+
+impl TextureT for Texture {
+    #[inline]
+    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        match self {
+            Texture::Uniform(t) => t.eval(store, si),
+        }
+    }
+    #[inline]
+    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+        match self {
+            Texture::Uniform(t) => t.eval_1(store, si),
+        }
+    }
+    fn mean(&self, store: &ParamStore) -> f32 {
+        match self {
+            Texture::Uniform(t) => t.mean(store),
+        }
+    }
+    fn max(&self, store: &ParamStore) -> f32 {
+        match self {
+            Texture::Uniform(t) => t.max(store),
+        }
+    }
+}
+
+/// How a texture-valued property is stored when given as a plain value.
+#[derive(Clone, Copy, Debug)]
+pub enum Channels {
+    /// One value (roughness, weight): `<float>`.
+    Mono,
+    /// RGB (reflectance, radiance): `<rgb>`, `<spectrum>` or `<float>`.
+    Rgb,
+}
+
+impl Texture {
+    /// The texture for property `name` of `node`: a nested `<texture>`, a
+    /// reference to one, or a plain value (`<float>`, `<rgb>`,
+    /// `<spectrum>`), which becomes a uniform texture with parameter key
+    /// `<node key>.<name>.value`. `default` is used when the property is
+    /// absent; `None` makes it required.
+    pub fn from_prop(
+        node: &Node,
+        name: &str,
+        default: Option<f32>,
+        channels: Channels,
+        domain: Domain,
+        ctx: &mut LoadContext,
+    ) -> Result<Texture> {
+        let key = format!("{}.{}", node.key, name);
+        let Some(p) = node.prop(name) else {
+            return match default {
+                Some(v) => Uniform::new(&key, channels, glam::Vec3::splat(v), domain, ctx)
+                    .map(Texture::Uniform),
+                None => Err(node.error(format!("missing required parameter '{name}'"))),
+            };
+        };
+        let value = match &p.value {
+            Value::Float(v) => glam::Vec3::splat(*v as f32),
+            Value::Spectrum(v) => glam::Vec3::splat(*v),
+            Value::Rgb(v) => match channels {
+                Channels::Rgb => *v,
+                Channels::Mono => {
+                    return Err(node.prop_error(p, "must be a float or a texture, found an rgb"))
+                }
+            },
+            Value::Node(n) => return Texture::from_node(n, ctx),
+            _ => return Err(node.prop_error(p, "must be a float, rgb, spectrum or texture")),
+        };
+        Uniform::new(&key, channels, value, domain, ctx)
+            .map(Texture::Uniform)
+            .map_err(|e| node.prop_error(p, e))
+    }
+
+    /// Builds a `<texture>` node.
+    pub fn from_node(node: &Node, _ctx: &mut LoadContext) -> Result<Texture> {
+        Err(node.error(format!(
+            "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard)",
+            node.plugin
+        )))
+    }
+}
