@@ -12,6 +12,8 @@ pub mod geometry;
 pub mod math;
 pub mod params;
 pub mod scene;
+#[cfg(test)]
+pub(crate) mod testing;
 pub mod texture;
 
 pub use error::{Error, Result};
