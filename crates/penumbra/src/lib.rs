@@ -4,6 +4,9 @@
 //! mathematics (interior vs boundary derivatives, detached sampling, path
 //! replay) that the code follows.
 
+// `!(x > 0.0)` is deliberate throughout: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod ad;
 pub mod bsdf;
 pub mod emitter;

@@ -189,6 +189,7 @@ impl<R: Real> Mul<R> for V3<R> {
         V3::new(self.x * s, self.y * s, self.z * s)
     }
 }
+#[allow(clippy::suspicious_arithmetic_impl)] // one reciprocal, three products
 impl<R: Real> Div<R> for V3<R> {
     type Output = V3<R>;
     #[inline(always)]
