@@ -150,8 +150,8 @@ mod tests {
             counts[i] += 1;
         }
         assert_eq!(counts[1], 0);
-        for i in 0..4 {
-            assert!((counts[i] as f32 / n as f32 - d.pmf(i)).abs() < 1e-3);
+        for (i, c) in counts.iter().enumerate() {
+            assert!((*c as f32 / n as f32 - d.pmf(i)).abs() < 1e-3);
         }
     }
 
