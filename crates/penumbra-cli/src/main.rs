@@ -1,1 +1,176 @@
-fn main() {}
+//! `penumbra`: render Mitsuba 3 scenes from the command line.
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use penumbra::image::{write_exr, write_png, Image};
+use penumbra::integrator::{render, RenderOptions};
+use penumbra::scene::Scene;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "penumbra",
+    version,
+    about = "A physics-based differentiable renderer"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a Mitsuba 3 XML scene to an EXR (linear float32, all channels)
+    /// or PNG (sRGB, 8-bit) image.
+    Render {
+        /// The scene file (Mitsuba 3 XML).
+        scene: PathBuf,
+        /// Output image: .exr or .png.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Samples per pixel (default: the scene's sampler).
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Seed of the random numbers.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Override a <default> of the scene: -D name=value (repeatable).
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// No progress bar or timing report.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+}
+
+/// Splits `-D name=value` arguments.
+fn parse_defines(defines: &[String]) -> Result<Vec<(String, String)>, String> {
+    defines
+        .iter()
+        .map(|d| match d.split_once('=') {
+            Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
+            _ => Err(format!("-D expects name=value, got '{d}'")),
+        })
+        .collect()
+}
+
+/// A progress bar with ETA over the render's tiles (hidden with --quiet).
+fn progress_bar(quiet: bool) -> Option<ProgressBar> {
+    if quiet {
+        return None;
+    }
+    let bar = ProgressBar::new(1);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} rendering [{elapsed_precise}] [{wide_bar}] {percent}% (ETA {eta})",
+        )
+        .expect("the progress template is valid")
+        .progress_chars("=> "),
+    );
+    Some(bar)
+}
+
+fn write_output(path: &Path, img: &Image, names: &[String]) -> penumbra::Result<()> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+    {
+        Some(e) if e == "exr" => {
+            let names: Vec<&str> = names.iter().map(String::as_str).collect();
+            write_exr(path, img, &names)
+        }
+        Some(e) if e == "png" => {
+            // PNG holds the colour channels only
+            let c = img.channels;
+            let rgb = Image {
+                width: img.width,
+                height: img.height,
+                channels: 3,
+                data: img
+                    .data
+                    .chunks_exact(c)
+                    .flat_map(|px| [px[0], px[1.min(c - 1)], px[2.min(c - 1)]])
+                    .collect(),
+            };
+            write_png(path, &rgb)
+        }
+        _ => Err(penumbra::Error::file(
+            path,
+            "unknown image format; use a .exr or .png file name",
+        )),
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        Command::Render {
+            scene,
+            output,
+            spp,
+            seed,
+            define,
+            threads,
+            quiet,
+        } => {
+            let defines = parse_defines(&define)?;
+            let t0 = Instant::now();
+            let scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            let t_load = t0.elapsed();
+            let bar = progress_bar(quiet);
+            let opts = RenderOptions {
+                spp,
+                seed,
+                threads,
+                progress: bar.clone().map(|b| {
+                    Arc::new(move |done: usize, total: usize| {
+                        b.set_length(total as u64);
+                        b.set_position(done as u64);
+                    }) as Arc<_>
+                }),
+                cancel: None,
+            };
+            let t1 = Instant::now();
+            let img = render(&scene, &opts).map_err(|e| e.to_string())?;
+            let t_render = t1.elapsed();
+            if let Some(b) = bar {
+                b.finish_and_clear();
+            }
+            let image = Image {
+                width: img.width,
+                height: img.height,
+                channels: img.channels(),
+                data: img.data,
+            };
+            write_output(&output, &image, &img.channel_names).map_err(|e| e.to_string())?;
+            if !quiet {
+                eprintln!(
+                    "{}: {}x{}, {} spp, loaded in {:.2} s, rendered in {:.2} s",
+                    output.display(),
+                    image.width,
+                    image.height,
+                    spp.unwrap_or_else(|| scene.sensor.sampler.sample_count()),
+                    t_load.as_secs_f64(),
+                    t_render.as_secs_f64()
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -31,6 +31,9 @@ pub enum Error {
     /// Invalid arguments to an API call (shapes, sizes, options).
     #[error("{0}")]
     Invalid(String),
+    /// The operation was cancelled (Ctrl-C, or a cancel flag).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 impl Error {

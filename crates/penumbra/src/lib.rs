@@ -12,9 +12,13 @@ pub mod bsdf;
 pub mod emitter;
 pub mod error;
 pub mod geometry;
+pub mod image;
+pub mod integrator;
 pub mod math;
 pub mod params;
+pub mod sampler;
 pub mod scene;
+pub mod sensor;
 #[cfg(test)]
 pub(crate) mod testing;
 pub mod texture;

@@ -4,6 +4,7 @@
 //! [`Hit`], the shape re-evaluates the hit in `R` from its parameters
 //! (vertex positions, centre, radius), so geometry derivatives can flow.
 
+pub mod accel;
 mod interaction;
 pub mod shape;
 

@@ -40,3 +40,131 @@ impl LoadContext {
         Ok(full)
     }
 }
+
+mod build;
+pub mod xml;
+
+use crate::ad::Real;
+use crate::bsdf::Bsdf;
+use crate::emitter::{DirectionSample, Emitter, EmitterT};
+use crate::geometry::accel::Accel;
+use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfaceInteraction};
+use crate::integrator::Integrator;
+use crate::math::Spectrum;
+use crate::sensor::Sensor;
+use glam::{Vec2, Vec3};
+use std::path::Path;
+
+/// What the scene knows about a shape besides its geometry.
+#[derive(Clone, Debug)]
+pub struct ShapeInfo {
+    /// Parameter-key prefix (the shape's id).
+    pub key: String,
+    pub bsdf: u32,
+    pub emitter: Option<u32>,
+}
+
+/// A loaded scene: parameters, plugins, and the acceleration structure.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub params: ParamStore,
+    pub shapes: Vec<Shape>,
+    pub shape_info: Vec<ShapeInfo>,
+    pub bsdfs: Vec<Bsdf>,
+    pub emitters: Vec<Emitter>,
+    /// The environment emitter (constant, envmap), if any.
+    pub environment: Option<u32>,
+    pub sensor: Sensor,
+    pub integrator: Integrator,
+    pub accel: Accel,
+}
+
+impl Scene {
+    /// Loads a Mitsuba 3 XML scene; `defines` override its `<default>`s.
+    pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
+        let root = xml::parse_file(path, defines)?;
+        Scene::from_root(&root)
+    }
+
+    /// Loads a scene from XML text; `path` names it in error messages and
+    /// is the base of relative file names.
+    pub fn load_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene> {
+        let root = xml::parse_str(text, path, defines)?;
+        Scene::from_root(&root)
+    }
+
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.accel.intersect(ray)
+    }
+
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.accel.occluded(ray)
+    }
+
+    /// Re-evaluates a hit in `R` (see [`ShapeT::surface_interaction`]).
+    #[inline]
+    pub fn surface_interaction<R: Real>(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction<R> {
+        self.shapes[hit.shape as usize].surface_interaction(&self.params, ray, hit)
+    }
+
+    #[inline]
+    pub fn shape_bsdf(&self, shape: u32) -> &Bsdf {
+        &self.bsdfs[self.shape_info[shape as usize].bsdf as usize]
+    }
+
+    #[inline]
+    pub fn shape_emitter(&self, shape: u32) -> Option<u32> {
+        self.shape_info[shape as usize].emitter
+    }
+
+    /// Samples an emitter uniformly, then a direction towards it from `si`,
+    /// and tests visibility. Returns the sample and `radiance / pdf`
+    /// (including the selection probability), or `None` if occluded.
+    pub fn sample_emitter_direction<R: Real>(
+        &self,
+        si: &SurfaceInteraction<R>,
+        u: Vec2,
+    ) -> Option<(DirectionSample, Spectrum<R>)> {
+        let n = self.emitters.len();
+        if n == 0 {
+            return None;
+        }
+        let x = u.x * n as f32;
+        let i = (x as usize).min(n - 1);
+        let u = Vec2::new((x - i as f32).min(1.0 - f32::EPSILON), u.y);
+        let p = si.p.val();
+        let (mut ds, w) =
+            self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, p, u)?;
+        if !(ds.pdf > 0.0) {
+            return None;
+        }
+        let ray = if ds.dist.is_finite() {
+            si.spawn_ray_to(ds.p)
+        } else {
+            si.spawn_ray(ds.d)
+        };
+        if self.occluded(&ray) {
+            return None;
+        }
+        ds.pdf /= n as f32;
+        Some((ds, w * R::cst(n as f32)))
+    }
+
+    /// Solid-angle density with which [`Scene::sample_emitter_direction`]
+    /// picks direction `d` from `ref_p` towards emitter `em`, reaching the
+    /// point `p` with normal `n`.
+    pub fn pdf_emitter_direction(&self, em: u32, ref_p: Vec3, d: Vec3, p: Vec3, n: Vec3) -> f32 {
+        self.emitters[em as usize].pdf_direction(&self.params, &self.shapes, ref_p, d, p, n)
+            / self.emitters.len() as f32
+    }
+
+    /// Applies parameter updates: rebuilds what depends on changed
+    /// parameters (the acceleration structure after vertex moves).
+    pub fn update(&mut self) {
+        if !self.params.take_dirty().is_empty() {
+            self.accel.update(&self.shapes, &self.params);
+        }
+    }
+}

@@ -1,0 +1,7 @@
+//! Films, reconstruction filters, image IO.
+
+pub mod film;
+pub mod rfilter;
+
+pub use film::{Film, ImageBlock};
+pub use rfilter::ReconstructionFilter;

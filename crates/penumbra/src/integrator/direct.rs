@@ -1,0 +1,115 @@
+//! Direct illumination with multiple importance sampling of emitters and
+//! the BSDF (Mitsuba's `direct`).
+
+use super::mis_weight;
+use crate::ad::Real;
+use crate::bsdf::{BsdfFlags, BsdfT};
+use crate::emitter::EmitterT;
+use crate::error::Result;
+use crate::geometry::Ray;
+use crate::math::{Spectrum, V3};
+use crate::sampler::SampleStream;
+use crate::scene::{Node, Scene};
+
+/// Direct lighting: `emitter_samples` emitter samples and `bsdf_samples`
+/// BSDF samples per hit, combined with the power heuristic.
+#[derive(Clone, Debug)]
+pub struct DirectIntegrator {
+    pub emitter_samples: u32,
+    pub bsdf_samples: u32,
+    pub hide_emitters: bool,
+}
+
+impl DirectIntegrator {
+    pub fn from_node(node: &Node) -> Result<DirectIntegrator> {
+        let shading = node.int_min("shading_samples", 1, 0)? as u32;
+        let emitter_samples = node.int_min("emitter_samples", shading as i64, 0)? as u32;
+        let bsdf_samples = node.int_min("bsdf_samples", shading as i64, 0)? as u32;
+        Ok(DirectIntegrator {
+            emitter_samples,
+            bsdf_samples,
+            hide_emitters: node.bool("hide_emitters", false)?,
+        })
+    }
+
+    pub fn sample<R: Real>(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream) -> Spectrum<R> {
+        let store = &scene.params;
+        let Some(hit) = scene.intersect(&ray) else {
+            return match scene.environment {
+                Some(env) if !self.hide_emitters => {
+                    scene.emitters[env as usize].eval_environment(store, ray.d)
+                }
+                _ => Spectrum::zero(),
+            };
+        };
+        let si = scene.surface_interaction::<R>(&ray, &hit);
+        let mut result = Spectrum::<R>::zero();
+        if let Some(em) = scene.shape_emitter(hit.shape) {
+            if !self.hide_emitters {
+                result += scene.emitters[em as usize].eval_surface(store, &si);
+            }
+        }
+        let bsdf = scene.shape_bsdf(hit.shape);
+        let (ne, nb) = (self.emitter_samples as f32, self.bsdf_samples as f32);
+        if bsdf.flags().has(BsdfFlags::SMOOTH) {
+            for _ in 0..self.emitter_samples {
+                let u = rng.next_2d();
+                if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u) {
+                    let wo = si.to_local(V3::cst(ds.d)).val();
+                    let f = bsdf.eval(store, &si, wo);
+                    let w = if ds.delta {
+                        1.0 / ne
+                    } else {
+                        let pb = bsdf.pdf(store, &si, wo);
+                        mis_weight(ne * ds.pdf, nb * pb) / ne
+                    };
+                    result += f.mul_elem(em_weight) * R::cst(w);
+                }
+            }
+        }
+        for _ in 0..self.bsdf_samples {
+            let u1 = rng.next_1d();
+            let u2 = rng.next_2d();
+            let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
+                continue;
+            };
+            let d = si.to_world(V3::cst(bs.wo)).val().normalize();
+            let delta = bs.lobe.has(BsdfFlags::DELTA);
+            let ray2 = si.spawn_ray(d);
+            let (le, em_pdf) = match scene.intersect(&ray2) {
+                Some(h2) => match scene.shape_emitter(h2.shape) {
+                    Some(em) => {
+                        let si2 = scene.surface_interaction::<R>(&ray2, &h2);
+                        let le = scene.emitters[em as usize].eval_surface(store, &si2);
+                        let pdf = if delta {
+                            0.0
+                        } else {
+                            scene.pdf_emitter_direction(em, si.p.val(), d, si2.p.val(), si2.n.val())
+                        };
+                        (le, pdf)
+                    }
+                    None => continue,
+                },
+                None => match scene.environment {
+                    Some(env) => {
+                        let le = scene.emitters[env as usize].eval_environment(store, d);
+                        let pdf = if delta {
+                            0.0
+                        } else {
+                            scene.pdf_emitter_direction(env, si.p.val(), d, d, d)
+                        };
+                        (le, pdf)
+                    }
+                    None => continue,
+                },
+            };
+            let w = if delta {
+                1.0 / nb
+            } else {
+                mis_weight(nb * bs.pdf, ne * em_pdf) / nb
+            };
+            result += bs.weight.mul_elem(le) * R::cst(w);
+        }
+        result
+    }
+}

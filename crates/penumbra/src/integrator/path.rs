@@ -1,0 +1,147 @@
+//! Unidirectional path tracing with next-event estimation and multiple
+//! importance sampling (power heuristic, Veach 1997 §9.2), Russian roulette
+//! (Mitsuba's `path`).
+
+use super::mis_weight;
+use crate::ad::Real;
+use crate::bsdf::{BsdfFlags, BsdfT};
+use crate::emitter::EmitterT;
+use crate::error::Result;
+use crate::geometry::Ray;
+use crate::math::{Spectrum, V3};
+use crate::sampler::SampleStream;
+use crate::scene::{Node, Scene};
+
+/// Path tracer settings.
+#[derive(Clone, Debug)]
+pub struct PathIntegrator {
+    /// Longest path, in vertices (1: only directly visible emitters);
+    /// `u32::MAX` for unbounded (`max_depth = -1`).
+    pub max_depth: u32,
+    /// Depth from which Russian roulette may end paths.
+    pub rr_depth: u32,
+    /// Directly visible emitters are not shown.
+    pub hide_emitters: bool,
+}
+
+impl PathIntegrator {
+    pub fn from_node(node: &Node) -> Result<PathIntegrator> {
+        Ok(PathIntegrator {
+            max_depth: super::max_depth(node)?,
+            rr_depth: node.int_min("rr_depth", 5, 1)? as u32,
+            hide_emitters: node.bool("hide_emitters", false)?,
+        })
+    }
+
+    /// Radiance arriving along `ray`, estimated with one path.
+    pub fn sample<R: Real>(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream) -> Spectrum<R> {
+        let store = &scene.params;
+        let mut ray = ray;
+        let mut result = Spectrum::<R>::zero();
+        let mut throughput = Spectrum::<R>::splat(R::cst(1.0));
+        let mut eta = 1.0f32;
+        // state of the previous vertex, for MIS of emitters hit by BSDF sampling
+        let mut prev_p = ray.o;
+        let mut prev_pdf = 1.0f32;
+        let mut prev_delta = true;
+        let mut depth = 0u32;
+        loop {
+            let hit = scene.intersect(&ray);
+            let Some(hit) = hit else {
+                // escaped: environment emission
+                if let Some(env) = scene.environment {
+                    if !(self.hide_emitters && depth == 0) {
+                        let e = &scene.emitters[env as usize];
+                        let le = e.eval_environment::<R>(store, ray.d);
+                        let w = if prev_delta {
+                            1.0
+                        } else {
+                            let em_pdf =
+                                scene.pdf_emitter_direction(env, prev_p, ray.d, ray.d, ray.d);
+                            mis_weight(prev_pdf, em_pdf)
+                        };
+                        result += throughput.mul_elem(le) * R::cst(w);
+                    }
+                }
+                break;
+            };
+            let si = scene.surface_interaction::<R>(&ray, &hit);
+
+            // emission of a surface hit by the previous BSDF sample
+            if let Some(em) = scene.shape_emitter(hit.shape) {
+                if !(self.hide_emitters && depth == 0) {
+                    let le = scene.emitters[em as usize].eval_surface(store, &si);
+                    if !le.is_zero() {
+                        let w = if prev_delta {
+                            1.0
+                        } else {
+                            let em_pdf = scene.pdf_emitter_direction(
+                                em,
+                                prev_p,
+                                ray.d,
+                                si.p.val(),
+                                si.n.val(),
+                            );
+                            mis_weight(prev_pdf, em_pdf)
+                        };
+                        result += throughput.mul_elem(le) * R::cst(w);
+                    }
+                }
+            }
+
+            if depth + 1 >= self.max_depth {
+                break;
+            }
+            let bsdf = scene.shape_bsdf(hit.shape);
+            let flags = bsdf.flags();
+
+            // next-event estimation
+            let u_light = rng.next_2d();
+            if flags.has(BsdfFlags::SMOOTH) {
+                if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u_light) {
+                    let wo = si.to_local(V3::cst(ds.d)).val();
+                    let f = bsdf.eval(store, &si, wo);
+                    if !f.is_zero() {
+                        let w = if ds.delta {
+                            1.0
+                        } else {
+                            mis_weight(ds.pdf, bsdf.pdf(store, &si, wo))
+                        };
+                        result += throughput.mul_elem(f).mul_elem(em_weight) * R::cst(w);
+                    }
+                }
+            }
+
+            // continue the path by BSDF sampling
+            let u1 = rng.next_1d();
+            let u2 = rng.next_2d();
+            let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
+                break;
+            };
+            throughput = throughput.mul_elem(bs.weight);
+            eta *= bs.eta;
+            let d = si.to_world(V3::cst(bs.wo)).val().normalize();
+            ray = si.spawn_ray(d);
+            prev_p = si.p.val();
+            prev_pdf = bs.pdf;
+            prev_delta = bs.lobe.has(BsdfFlags::DELTA);
+
+            // Russian roulette on the throughput (times η² so that
+            // refraction does not end paths early)
+            let u_rr = rng.next_1d();
+            let t_max = throughput.val().max_element() * eta * eta;
+            if !(t_max > 0.0) {
+                break;
+            }
+            if depth >= self.rr_depth {
+                let q = t_max.min(0.95);
+                if u_rr >= q {
+                    break;
+                }
+                throughput = throughput * R::cst(1.0 / q);
+            }
+            depth += 1;
+        }
+        result
+    }
+}

@@ -1,0 +1,174 @@
+//! Assembles a [`Scene`] from the parsed description: builds every plugin
+//! once (objects referenced from several places are shared), wires shapes
+//! to their BSDFs and area emitters, and builds the acceleration structure.
+
+use super::{Class, LoadContext, Node, Scene, ShapeInfo};
+use crate::bsdf::Bsdf;
+use crate::emitter::{Emitter, EmitterT};
+use crate::error::Result;
+use crate::geometry::accel::Accel;
+use crate::geometry::Shape;
+use crate::integrator::{Integrator, PathIntegrator};
+use crate::sensor::Sensor;
+use std::collections::HashMap;
+use std::rc::Rc;
+
+/// Builds plugins, remembering which node became which object.
+struct Builder {
+    ctx: LoadContext,
+    bsdfs: Vec<Bsdf>,
+    bsdf_of_node: HashMap<*const Node, u32>,
+    shapes: Vec<Shape>,
+    shape_info: Vec<ShapeInfo>,
+    emitters: Vec<Emitter>,
+    environment: Option<u32>,
+    sensors: Vec<Sensor>,
+    integrator: Option<Integrator>,
+}
+
+impl Builder {
+    fn bsdf(&mut self, node: &Rc<Node>) -> Result<u32> {
+        if let Some(&i) = self.bsdf_of_node.get(&Rc::as_ptr(node)) {
+            return Ok(i);
+        }
+        let b = Bsdf::from_node(node, &mut self.ctx)?;
+        node.check_all_used()?;
+        let i = self.bsdfs.len() as u32;
+        self.bsdfs.push(b);
+        self.bsdf_of_node.insert(Rc::as_ptr(node), i);
+        Ok(i)
+    }
+
+    /// The BSDF of a shape that names none: Mitsuba's default, a diffuse
+    /// with reflectance 0.5.
+    fn default_bsdf(&mut self, shape: &Node) -> Result<u32> {
+        let node = Rc::new(Node::new(
+            Class::Bsdf,
+            "diffuse",
+            None,
+            format!("{}.bsdf", shape.key),
+            shape.loc.clone(),
+        ));
+        self.bsdf(&node)
+    }
+
+    fn emitter(&mut self, node: &Node, shape: Option<u32>) -> Result<u32> {
+        let e = Emitter::from_node(node, shape, &mut self.ctx)?;
+        node.check_all_used()?;
+        let i = self.emitters.len() as u32;
+        if e.is_environment() {
+            if self.environment.is_some() {
+                return Err(node
+                    .error("a scene can have only one environment emitter (constant or envmap)"));
+            }
+            self.environment = Some(i);
+        }
+        self.emitters.push(e);
+        Ok(i)
+    }
+
+    fn shape(&mut self, node: &Rc<Node>) -> Result<()> {
+        for medium in ["interior", "exterior"] {
+            if let Some(p) = node.prop(medium) {
+                return Err(node.prop_error(
+                    p,
+                    "participating media are not supported yet; remove the medium reference",
+                ));
+            }
+        }
+        let shape = Shape::from_node(node, &mut self.ctx)?;
+        let index = self.shapes.len() as u32;
+        let bsdf = match node.child("bsdf")? {
+            Some(b) => self.bsdf(&b)?,
+            None => self.default_bsdf(node)?,
+        };
+        let emitter = match node.child("emitter")? {
+            Some(e) => Some(self.emitter(&e, Some(index))?),
+            None => None,
+        };
+        node.check_all_used()?;
+        self.shapes.push(shape);
+        self.shape_info.push(ShapeInfo {
+            key: node.key.clone(),
+            bsdf,
+            emitter,
+        });
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// Builds a scene from the root of a parsed scene description.
+    pub fn from_root(root: &Node) -> Result<Scene> {
+        let mut b = Builder {
+            ctx: LoadContext::default(),
+            bsdfs: Vec::new(),
+            bsdf_of_node: HashMap::new(),
+            shapes: Vec::new(),
+            shape_info: Vec::new(),
+            emitters: Vec::new(),
+            environment: None,
+            sensors: Vec::new(),
+            integrator: None,
+        };
+        for p in &root.props {
+            let Some(node) = root.child(&p.name)? else {
+                return Err(
+                    root.prop_error(p, "only objects may appear at the top level of a scene")
+                );
+            };
+            match node.class {
+                Class::Shape => b.shape(&node)?,
+                Class::Bsdf => {
+                    b.bsdf(&node)?;
+                }
+                Class::Emitter => {
+                    b.emitter(&node, None)?;
+                }
+                Class::Sensor => b.sensors.push(Sensor::from_node(&node)?),
+                Class::Integrator => {
+                    if b.integrator.is_some() {
+                        return Err(node.error("a scene can have only one <integrator>"));
+                    }
+                    b.integrator = Some(Integrator::from_node(&node)?);
+                }
+                // textures are built where they are used (and shared there)
+                Class::Texture => {}
+                Class::Medium | Class::Phase | Class::Volume => {
+                    return Err(
+                        node.error("participating media are not supported yet (only surfaces)")
+                    )
+                }
+                Class::Film | Class::Rfilter | Class::Sampler | Class::Scene => {
+                    return Err(node.error(format!(
+                        "a <{}> belongs inside a <sensor> (or <film>), not at the top level",
+                        node.class.tag()
+                    )))
+                }
+            }
+        }
+        root.check_all_used()?;
+        if b.sensors.is_empty() {
+            return Err(
+                root.error("the scene has no <sensor>; add one (e.g. a perspective camera)")
+            );
+        }
+        let store = b.ctx.store;
+        let accel = Accel::build(&b.shapes, &store);
+        Ok(Scene {
+            params: store,
+            shapes: b.shapes,
+            shape_info: b.shape_info,
+            bsdfs: b.bsdfs,
+            emitters: b.emitters,
+            environment: b.environment,
+            sensor: b.sensors.swap_remove(0),
+            integrator: b.integrator.unwrap_or(Integrator::Path(PathIntegrator {
+                max_depth: u32::MAX,
+                rr_depth: 5,
+                hide_emitters: false,
+            })),
+            accel,
+        })
+    }
+}

@@ -1,0 +1,62 @@
+//! White furnace: a white diffuse sphere inside a uniform environment of
+//! radiance 1 must look exactly like the environment (every path's
+//! expected value is 1), for the path tracer with unbounded depth and
+//! Russian roulette. Any energy gain or loss (BSDF normalisation, MIS
+//! weights, emitter pdfs, roulette weights) shows as a mean ≠ 1.
+
+use penumbra::integrator::{render, RenderOptions};
+use penumbra::scene::Scene;
+use std::path::Path;
+
+fn furnace(bsdf: &str) -> (f64, f64) {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="path"/>
+            <sensor type="perspective">
+                <float name="fov" value="30"/>
+                <transform name="to_world">
+                    <lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
+                </transform>
+                <film type="hdrfilm">
+                    <integer name="width" value="32"/>
+                    <integer name="height" value="32"/>
+                    <rfilter type="box"/>
+                </film>
+                <sampler type="independent"><integer name="sample_count" value="64"/></sampler>
+            </sensor>
+            <shape type="sphere">{bsdf}</shape>
+            <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+        </scene>"#
+    );
+    let scene = Scene::load_str(&xml, Path::new("furnace.xml"), &[]).unwrap();
+    let img = render(
+        &scene,
+        &RenderOptions {
+            seed: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // mean and its standard error over pixels (pixels are independent)
+    let v: Vec<f64> = img.data.iter().map(|&x| x as f64).collect();
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+#[test]
+fn white_diffuse_sphere_disappears_in_a_furnace() {
+    let (mean, se) =
+        furnace(r#"<bsdf type="diffuse"><rgb name="reflectance" value="1, 1, 1"/></bsdf>"#);
+    eprintln!("diffuse furnace: {mean} ± {se}");
+    assert!((mean - 1.0).abs() < 5.0 * se + 1e-4, "mean {mean} ± {se}");
+}
+
+#[test]
+fn smooth_dielectric_sphere_disappears_in_a_furnace() {
+    // lossless: every path carries weight 1 (reflection or refraction)
+    let (mean, se) = furnace(r#"<bsdf type="dielectric"/>"#);
+    eprintln!("dielectric furnace: {mean} ± {se}");
+    assert!((mean - 1.0).abs() < 5.0 * se + 1e-3, "mean {mean} ± {se}");
+}
