@@ -47,6 +47,20 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Time renders of a scene in one process: the first render and the
+    /// following (warm) ones, with peak memory; prints one JSON line.
+    Bench {
+        scene: PathBuf,
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Warm renders after the first.
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
 }
 
 /// Splits `-D name=value` arguments.
@@ -162,7 +176,67 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
+        Command::Bench {
+            scene,
+            spp,
+            reps,
+            define,
+            threads,
+        } => {
+            let defines = parse_defines(&define)?;
+            let t0 = Instant::now();
+            let loaded = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            let load_s = t0.elapsed().as_secs_f64();
+            let opts = RenderOptions {
+                spp,
+                threads,
+                ..Default::default()
+            };
+            let mut times = Vec::with_capacity(reps + 1);
+            for i in 0..=reps {
+                let t = Instant::now();
+                let img = render(
+                    &loaded,
+                    &RenderOptions {
+                        seed: i as u64,
+                        ..opts.clone()
+                    },
+                )
+                .map_err(|e| e.to_string())?;
+                times.push(t.elapsed().as_secs_f64());
+                std::hint::black_box(img);
+            }
+            let mut warm = times[1..].to_vec();
+            warm.sort_by(f64::total_cmp);
+            let median = if warm.is_empty() {
+                f64::NAN
+            } else {
+                warm[warm.len() / 2]
+            };
+            println!(
+                "{{\"scene\": \"{}\", \"spp\": {}, \"load_s\": {load_s:.4}, \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
+                scene.display(),
+                spp.unwrap_or_else(|| loaded.sensor.sampler.sample_count()),
+                times[0],
+                peak_rss_mb()
+            );
+            Ok(())
+        }
     }
+}
+
+/// Peak resident memory of this process (VmHWM), in MiB; NaN where the
+/// platform does not report it.
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map(|kb| kb / 1024.0)
+        .unwrap_or(f64::NAN)
 }
 
 fn main() -> ExitCode {

@@ -9,6 +9,7 @@
 
 pub mod ad;
 pub mod bsdf;
+pub mod diff;
 pub mod emitter;
 pub mod error;
 pub mod geometry;

@@ -4,7 +4,7 @@
 mod aov;
 mod direct;
 mod path;
-mod render;
+pub(crate) mod render;
 
 pub use aov::{AovIntegrator, AovKind};
 pub use direct::DirectIntegrator;
