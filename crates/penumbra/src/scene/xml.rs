@@ -1008,6 +1008,35 @@ mod tests {
     }
 
     #[test]
+    fn nested_objects_with_ids_are_keyed_by_id_and_referable() {
+        let root = parse(&format!(
+            "{HEAD}<shape type=\"sphere\" id=\"s\">\n\
+               <bsdf type=\"diffuse\">\n\
+                 <texture type=\"checkerboard\" name=\"reflectance\" id=\"checks\"/>\n\
+               </bsdf>\n\
+             </shape>\n\
+             <bsdf type=\"diffuse\" id=\"other\"><ref name=\"reflectance\" id=\"checks\"/></bsdf>\n\
+             </scene>"
+        ))
+        .unwrap();
+        let tex = child(&child(&child(&root, "s"), "bsdf"), "reflectance");
+        assert_eq!(tex.key, "checks");
+        assert_eq!(child(&child(&root, "s"), "bsdf").key, "s.bsdf");
+        assert!(Rc::ptr_eq(
+            &child(&child(&root, "other"), "reflectance"),
+            &tex
+        ));
+        // a ref to an enclosing object (a cycle) is not declared yet
+        let e = err(&format!(
+            "{HEAD}<bsdf type=\"blendbsdf\" id=\"b\">\n<ref id=\"b\"/>\n</bsdf></scene>"
+        ));
+        assert!(
+            e.starts_with("t.xml:3:") && e.contains("no object with id 'b'"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn typed_values_and_substitution() {
         let root = parse_str(
             &format!(
