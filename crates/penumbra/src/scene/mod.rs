@@ -2,8 +2,10 @@
 //! the assembled [`Scene`] that integrators render.
 
 mod props;
+pub mod xml;
 
 pub use props::{Class, Node, Prop, Value};
+pub use xml::{child_key, parse_file, parse_str};
 
 use crate::error::{Error, Result};
 use crate::params::ParamStore;
