@@ -44,7 +44,6 @@ impl LoadContext {
 }
 
 mod build;
-pub mod xml;
 
 use crate::ad::Real;
 use crate::bsdf::Bsdf;

@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Forward-rendering benchmark: Penumbra beside Mitsuba 3, measured in the
+same run (the machine is noisy: compare ratios, not seconds).
+
+For each scene (256², 64 spp by default) it runs, each in its own process:
+  - `penumbra bench` (first render and warm median, peak RSS),
+  - Mitsuba 3 llvm_ad_rgb (first call = JIT compile + render, warm median)
+    and scalar_rgb, through ../shared/reference/scripts/bench.py,
+and prints a Markdown table with the ratios Mitsuba / Penumbra (> 1: we are
+faster).
+
+  python3 scripts/bench_vs_mitsuba.py [--scenes cbox mesh_heavy bsdfs textured]
+      [--spp 64] [--reps 3] [--mitsuba-python ~/.cache/penumbra-mitsuba/venv/bin/python]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+KIT = os.path.join(ROOT, '..', 'shared', 'reference')
+
+
+def run_json(cmd, env=None, prefix=''):
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    if out.returncode != 0:
+        sys.exit(f'failed: {" ".join(cmd)}\n{out.stderr}')
+    for line in out.stdout.splitlines():
+        if line.startswith(prefix + '{'):
+            return json.loads(line[len(prefix):])
+    sys.exit(f'no result from {" ".join(cmd)}:\n{out.stdout}\n{out.stderr}')
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--scenes', nargs='+', default=['cbox', 'mesh_heavy', 'bsdfs', 'textured'])
+    ap.add_argument('--spp', type=int, default=64)
+    ap.add_argument('--reps', type=int, default=3)
+    ap.add_argument('--mitsuba-python',
+                    default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
+    ap.add_argument('--no-scalar', action='store_true', help='skip Mitsuba scalar_rgb (slow)')
+    a = ap.parse_args()
+    subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
+    exe = os.path.join(ROOT, 'target', 'release', 'penumbra')
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
+        'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
+    rows = []
+    for s in a.scenes:
+        ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
+                         '--reps', str(a.reps)])
+        bench = os.path.join(KIT, 'scripts', 'bench.py')
+        llvm = run_json([a.mitsuba_python, bench, 'fwd', '--scene', s, '--variant', 'llvm_ad_rgb',
+                         '--spp', str(a.spp), '--reps', str(a.reps)], env, 'RESULT ')
+        scalar = None if a.no_scalar else run_json(
+            [a.mitsuba_python, bench, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
+             '--spp', str(a.spp), '--reps', '1'], env, 'RESULT ')
+        rows.append((s, ours, llvm, scalar))
+        print(f'{s}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} warm {llvm["warm_median_s"]:.3f}',
+              file=sys.stderr, flush=True)
+    print(f'\n| scene ({a.spp} spp, 256²) | Penumbra first s | Penumbra warm s | Penumbra peak MB '
+          '| Mitsuba llvm first s | Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
+          '| llvm warm / Penumbra warm | llvm first / Penumbra first | scalar / Penumbra |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    for s, o, l, sc in rows:
+        sc_t = sc['warm_median_s'] if sc else float('nan')
+        print(f'| {s} | {o["first_s"]:.3f} | {o["warm_median_s"]:.3f} | {o["peak_rss_mb"]:.0f} '
+              f'| {l["first_s"]:.3f} | {l["warm_median_s"]:.3f} | {l["peak_rss_mb_inproc"]:.0f} '
+              f'| {sc_t:.3f} | {l["warm_median_s"] / o["warm_median_s"]:.2f} '
+              f'| {l["first_s"] / o["first_s"]:.2f} | {sc_t / o["warm_median_s"]:.2f} |')
+
+
+if __name__ == '__main__':
+    main()
