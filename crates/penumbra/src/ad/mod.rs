@@ -13,8 +13,10 @@
 //! one place: the parameter store's `read`.
 
 mod dual;
+pub mod reverse;
 
 pub use dual::Dual;
+pub use reverse::Var;
 
 use crate::params::{ParamId, ParamStore};
 use std::fmt::Debug;

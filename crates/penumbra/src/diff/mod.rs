@@ -5,8 +5,10 @@
 //! parameter.
 
 mod forward;
+mod prb;
 
 pub use forward::render_forward;
+pub use prb::{render_backward, GradEntry, Gradients};
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;

@@ -109,19 +109,23 @@ impl ImageBlock {
         }
     }
 
-    /// Splats a sample at continuous crop-window position `(px, py)`
-    /// (pixel `(i, j)` spans `[i, i+1) × [j, j+1)`) to every pixel of the
-    /// block the filter reaches.
+    /// Calls `f(i, j, w)` for every pixel `(i, j)` of this block that the
+    /// filter centred on the continuous position `(px, py)` reaches with
+    /// weight `w > 0` (pixel `(i, j)` spans `[i, i+1) × [j, j+1)`).
     #[inline]
-    pub fn put(&mut self, filter: &ReconstructionFilter, px: f32, py: f32, values: &[f32]) {
-        debug_assert_eq!(values.len(), self.channels);
+    pub fn footprint(
+        &self,
+        filter: &ReconstructionFilter,
+        px: f32,
+        py: f32,
+        mut f: impl FnMut(i64, i64, f64),
+    ) {
         let r = filter.radius();
         // pixels whose centre (i + 0.5) is within r of px
         let i0 = ((px - 0.5 - r).ceil() as i64).max(self.x0);
         let i1 = ((px - 0.5 + r).floor() as i64).min(self.x0 + self.width as i64 - 1);
         let j0 = ((py - 0.5 - r).ceil() as i64).max(self.y0);
         let j1 = ((py - 0.5 + r).floor() as i64).min(self.y0 + self.height as i64 - 1);
-        let stride = self.channels + 1;
         for j in j0..=j1 {
             let wy = filter.eval(j as f32 + 0.5 - py);
             if wy == 0.0 {
@@ -129,17 +133,83 @@ impl ImageBlock {
             }
             for i in i0..=i1 {
                 let w = (wy * filter.eval(i as f32 + 0.5 - px)) as f64;
-                if w == 0.0 {
-                    continue;
+                if w != 0.0 {
+                    f(i, j, w);
                 }
-                let o = (((j - self.y0) as usize) * self.width + (i - self.x0) as usize) * stride;
-                let px_data = &mut self.data[o..o + stride];
-                for (acc, v) in px_data.iter_mut().zip(values) {
-                    *acc += w * *v as f64;
-                }
-                px_data[self.channels] += w;
             }
         }
+    }
+
+    /// Offset of pixel `(i, j)`'s data.
+    #[inline(always)]
+    fn offset(&self, i: i64, j: i64) -> usize {
+        (((j - self.y0) as usize) * self.width + (i - self.x0) as usize) * (self.channels + 1)
+    }
+
+    /// Splats a sample at continuous crop-window position `(px, py)` to
+    /// every pixel of the block the filter reaches.
+    #[inline]
+    pub fn put(&mut self, filter: &ReconstructionFilter, px: f32, py: f32, values: &[f32]) {
+        debug_assert_eq!(values.len(), self.channels);
+        let c = self.channels;
+        let mut hits = [(0i64, 0i64, 0f64); 32];
+        let mut n = 0;
+        // collect first: the footprint borrows the block immutably
+        self.footprint(filter, px, py, |i, j, w| {
+            if n < hits.len() {
+                hits[n] = (i, j, w);
+            }
+            n += 1;
+        });
+        if n > hits.len() {
+            // a filter wider than 32 pixels: fall back to a heap list
+            let mut all = Vec::with_capacity(n);
+            self.footprint(filter, px, py, |i, j, w| all.push((i, j, w)));
+            for (i, j, w) in all {
+                self.add_weighted(i, j, w, values, c);
+            }
+            return;
+        }
+        for &(i, j, w) in &hits[..n] {
+            self.add_weighted(i, j, w, values, c);
+        }
+    }
+
+    #[inline(always)]
+    fn add_weighted(&mut self, i: i64, j: i64, w: f64, values: &[f32], c: usize) {
+        let o = self.offset(i, j);
+        let px = &mut self.data[o..o + c + 1];
+        for (acc, v) in px.iter_mut().zip(values) {
+            *acc += w * *v as f64;
+        }
+        px[c] += w;
+    }
+
+    /// The adjoint of splatting then developing: for a sample at `(px, py)`,
+    /// `Σ_p d_image[p] · w_p / W_p` over the pixels p it reaches, where
+    /// `W_p` is pixel p's total filter weight (the weight channel of this
+    /// block, which must hold the whole crop window) and `d_image` is
+    /// `∂loss/∂pixel` with `out.len()` channels.
+    pub fn gather_adjoint(
+        &self,
+        filter: &ReconstructionFilter,
+        px: f32,
+        py: f32,
+        d_image: &[f32],
+        out: &mut [f32],
+    ) {
+        let c = out.len();
+        out.fill(0.0);
+        self.footprint(filter, px, py, |i, j, w| {
+            let total = self.data[self.offset(i, j) + self.channels];
+            if total > 0.0 {
+                let k = ((j - self.y0) as usize * self.width + (i - self.x0) as usize) * c;
+                let s = (w / total) as f32;
+                for (o, d) in out.iter_mut().zip(&d_image[k..k + c]) {
+                    *o += d * s;
+                }
+            }
+        });
     }
 
     /// Adds the overlapping part of `other` into this block.
@@ -202,7 +272,8 @@ mod tests {
         let mut b = ImageBlock::new(-2, -2, 5, 5, 1);
         b.put(&f, 0.5, 0.5, &[1.0]);
         let w = |i: usize, j: usize| b.data[(j * 5 + i) * 2 + 1];
-        assert!(w(2, 2) > w(1, 2) && w(1, 2) > w(0, 2) && w(0, 2) > 0.0);
+        // weight falls with distance and vanishes at the radius (2 pixels)
+        assert!(w(2, 2) > w(1, 2) && w(1, 2) > 0.0 && w(0, 2) == 0.0);
         assert!((w(1, 2) - w(3, 2)).abs() < 1e-12);
         assert!((f.eval(2.0)).abs() < 1e-7);
     }

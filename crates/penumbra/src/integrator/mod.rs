@@ -3,7 +3,7 @@
 
 mod aov;
 mod direct;
-mod path;
+pub(crate) mod path;
 pub(crate) mod render;
 
 pub use aov::{AovIntegrator, AovKind};

@@ -35,9 +35,25 @@ impl PathIntegrator {
 
     /// Radiance arriving along `ray`, estimated with one path.
     pub fn sample<R: Real>(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream) -> Spectrum<R> {
+        let mut sink = Accumulate(Spectrum::zero());
+        self.trace(scene, ray, rng, &mut sink);
+        sink.0
+    }
+
+    /// Traces one path, reporting its radiance contributions and scattering
+    /// weights to `sink` vertex by vertex. The primal and forward-mode
+    /// estimates ([`Accumulate`]) and path replay
+    /// (`crate::diff::prb`) share this one loop, so they sample the very
+    /// same paths.
+    pub(crate) fn trace<R: Real, S: PathSink<R>>(
+        &self,
+        scene: &Scene,
+        ray: Ray,
+        rng: &mut SampleStream,
+        sink: &mut S,
+    ) {
         let store = &scene.params;
         let mut ray = ray;
-        let mut result = Spectrum::<R>::zero();
         let mut throughput = Spectrum::<R>::splat(R::cst(1.0));
         let mut eta = 1.0f32;
         // state of the previous vertex, for MIS of emitters hit by BSDF sampling
@@ -46,13 +62,11 @@ impl PathIntegrator {
         let mut prev_delta = true;
         let mut depth = 0u32;
         loop {
-            let hit = scene.intersect(&ray);
-            let Some(hit) = hit else {
+            let Some(hit) = scene.intersect(&ray) else {
                 // escaped: environment emission
                 if let Some(env) = scene.environment {
                     if !(self.hide_emitters && depth == 0) {
-                        let e = &scene.emitters[env as usize];
-                        let le = e.eval_environment::<R>(store, ray.d);
+                        let le = scene.emitters[env as usize].eval_environment::<R>(store, ray.d);
                         let w = if prev_delta {
                             1.0
                         } else {
@@ -60,10 +74,11 @@ impl PathIntegrator {
                                 scene.pdf_emitter_direction(env, prev_p, ray.d, ray.d, ray.d);
                             mis_weight(prev_pdf, em_pdf)
                         };
-                        result += throughput.mul_elem(le) * R::cst(w);
+                        sink.add(throughput.mul_elem(le) * R::cst(w));
                     }
                 }
-                break;
+                sink.end_vertex(None);
+                return;
             };
             let si = scene.surface_interaction::<R>(&ray, &hit);
 
@@ -84,20 +99,20 @@ impl PathIntegrator {
                             );
                             mis_weight(prev_pdf, em_pdf)
                         };
-                        result += throughput.mul_elem(le) * R::cst(w);
+                        sink.add(throughput.mul_elem(le) * R::cst(w));
                     }
                 }
             }
 
             if depth + 1 >= self.max_depth {
-                break;
+                sink.end_vertex(None);
+                return;
             }
             let bsdf = scene.shape_bsdf(hit.shape);
-            let flags = bsdf.flags();
 
             // next-event estimation
             let u_light = rng.next_2d();
-            if flags.has(BsdfFlags::SMOOTH) {
+            if bsdf.flags().has(BsdfFlags::SMOOTH) {
                 if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u_light) {
                     let wo = si.to_local(V3::cst(ds.d)).val();
                     let f = bsdf.eval(store, &si, wo);
@@ -107,7 +122,7 @@ impl PathIntegrator {
                         } else {
                             mis_weight(ds.pdf, bsdf.pdf(store, &si, wo))
                         };
-                        result += throughput.mul_elem(f).mul_elem(em_weight) * R::cst(w);
+                        sink.add(throughput.mul_elem(f).mul_elem(em_weight) * R::cst(w));
                     }
                 }
             }
@@ -116,9 +131,11 @@ impl PathIntegrator {
             let u1 = rng.next_1d();
             let u2 = rng.next_2d();
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
-                break;
+                sink.end_vertex(None);
+                return;
             };
-            throughput = throughput.mul_elem(bs.weight);
+            throughput = sink.next_throughput(throughput, bs.weight);
+            sink.end_vertex(Some(bs.weight));
             eta *= bs.eta;
             let d = si.to_world(V3::cst(bs.wo)).val().normalize();
             ray = si.spawn_ray(d);
@@ -131,17 +148,44 @@ impl PathIntegrator {
             let u_rr = rng.next_1d();
             let t_max = throughput.val().max_element() * eta * eta;
             if !(t_max > 0.0) {
-                break;
+                return;
             }
             if depth >= self.rr_depth {
                 let q = t_max.min(0.95);
                 if u_rr >= q {
-                    break;
+                    return;
                 }
                 throughput = throughput * R::cst(1.0 / q);
             }
             depth += 1;
         }
-        result
     }
+}
+
+/// Receives what a path contributes, vertex by vertex.
+pub(crate) trait PathSink<R: Real> {
+    /// A radiance contribution, already weighted by the path throughput.
+    fn add(&mut self, l: Spectrum<R>);
+    /// The throughput after scattering with BSDF-sample weight `w`.
+    fn next_throughput(&mut self, throughput: Spectrum<R>, w: Spectrum<R>) -> Spectrum<R>;
+    /// The current vertex is complete; `w` is the weight of the scattering
+    /// that continues the path from it (`None`: the path ends there).
+    fn end_vertex(&mut self, w: Option<Spectrum<R>>);
+}
+
+/// The ordinary estimator: sums the contributions (primal in f32,
+/// derivatives carried along for dual numbers).
+pub(crate) struct Accumulate<R>(pub Spectrum<R>);
+
+impl<R: Real> PathSink<R> for Accumulate<R> {
+    #[inline(always)]
+    fn add(&mut self, l: Spectrum<R>) {
+        self.0 += l;
+    }
+    #[inline(always)]
+    fn next_throughput(&mut self, throughput: Spectrum<R>, w: Spectrum<R>) -> Spectrum<R> {
+        throughput.mul_elem(w)
+    }
+    #[inline(always)]
+    fn end_vertex(&mut self, _w: Option<Spectrum<R>>) {}
 }

@@ -65,10 +65,141 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
     })
 }
 
+/// The rectangle of film pixels (crop-window coordinates, possibly
+/// negative in the sampled border) whose samples one task takes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Tile {
+    pub x0: i64,
+    pub y0: i64,
+    pub w: i64,
+    pub h: i64,
+}
+
+/// Everything that fixes where samples go: shared by all passes over the
+/// image so that they draw exactly the same samples.
+pub(crate) struct SampleLayout<'a> {
+    scene: &'a Scene,
+    pub spp: u32,
+    seed: u64,
+    inv_size: Vec2,
+    crop_off: Vec2,
+    lens: bool,
+    /// The sampled region (crop window, plus the filter border with
+    /// `sample_border`).
+    region: Tile,
+    /// How far (pixels) one sample's filter reaches beyond its pixel.
+    pub margin: i64,
+}
+
+impl<'a> SampleLayout<'a> {
+    pub fn new(scene: &'a Scene, opts: &RenderOptions) -> Result<SampleLayout<'a>> {
+        let film = &scene.sensor.film;
+        let spp = opts
+            .spp
+            .unwrap_or_else(|| scene.sensor.sampler.sample_count());
+        if spp == 0 {
+            return Err(Error::Invalid("spp must be at least 1".into()));
+        }
+        let margin = film.rfilter.border() as i64;
+        let b = if film.sample_border { margin } else { 0 };
+        let (cw, ch) = (film.crop_size.0 as i64, film.crop_size.1 as i64);
+        Ok(SampleLayout {
+            scene,
+            spp,
+            seed: opts.seed,
+            inv_size: Vec2::new(1.0 / film.width as f32, 1.0 / film.height as f32),
+            crop_off: Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32),
+            lens: scene.sensor.needs_aperture_sample(),
+            region: Tile {
+                x0: -b,
+                y0: -b,
+                w: cw + 2 * b,
+                h: ch + 2 * b,
+            },
+            margin,
+        })
+    }
+
+    /// Crop-window size.
+    pub fn size(&self) -> (usize, usize) {
+        self.scene.sensor.film.crop_size
+    }
+
+    /// Calls `f(film position, camera ray, sample stream)` for every sample
+    /// of every pixel of `tile`, in a fixed order.
+    #[inline]
+    pub fn for_each_sample(&self, tile: Tile, mut f: impl FnMut(Vec2, Ray, &mut SampleStream)) {
+        let sensor = &self.scene.sensor;
+        for y in tile.y0..tile.y0 + tile.h {
+            for x in tile.x0..tile.x0 + tile.w {
+                // a key per film pixel (border pixels included)
+                let pixel = ((y + 0x8000) as u64) << 32 | (x + 0x8000) as u64;
+                for s in 0..self.spp {
+                    let mut rng = sensor.sampler.stream(self.seed, pixel, s, self.spp);
+                    let u = rng.next_2d();
+                    let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
+                    let lens_u = if self.lens { rng.next_2d() } else { Vec2::ZERO };
+                    let ray = sensor.sample_ray((pos + self.crop_off) * self.inv_size, lens_u);
+                    f(pos, ray, &mut rng);
+                }
+            }
+        }
+    }
+
+    /// Runs `per_tile` on every tile of the sampled region, in parallel,
+    /// and returns the results in tile order (so that merging them is
+    /// deterministic). Honours threads, progress and cancellation.
+    pub fn map_tiles<T: Send>(
+        &self,
+        opts: &RenderOptions,
+        per_tile: impl Fn(Tile) -> T + Sync,
+    ) -> Result<Vec<T>> {
+        let r = self.region;
+        let tiles_x = (r.w as usize).div_ceil(TILE);
+        let tiles_y = (r.h as usize).div_ceil(TILE);
+        let n_tiles = tiles_x * tiles_y;
+        let done = AtomicUsize::new(0);
+        let run_tile = |t: usize| -> Option<T> {
+            if let Some(c) = &opts.cancel {
+                if c.load(Ordering::Relaxed) {
+                    return None;
+                }
+            }
+            let x0 = r.x0 + ((t % tiles_x) * TILE) as i64;
+            let y0 = r.y0 + ((t / tiles_x) * TILE) as i64;
+            let tile = Tile {
+                x0,
+                y0,
+                w: (TILE as i64).min(r.x0 + r.w - x0),
+                h: (TILE as i64).min(r.y0 + r.h - y0),
+            };
+            let out = per_tile(tile);
+            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Some(p) = &opts.progress {
+                p(k, n_tiles);
+            }
+            Some(out)
+        };
+        let run = || -> Vec<Option<T>> { (0..n_tiles).into_par_iter().map(run_tile).collect() };
+        let results = match opts.threads {
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?
+                .install(run),
+            None => run(),
+        };
+        results
+            .into_iter()
+            .map(|r| r.ok_or(Error::Interrupted))
+            .collect()
+    }
+}
+
 /// Runs `sample(ray, stream, out)` for every sample of every pixel of the
 /// sensor's crop window (and its border, with `sample_border`), splats the
 /// `channels` values it writes, and returns the merged crop-window block.
-/// Shared by primal, forward-mode and reverse-mode rendering.
+/// Shared by primal and forward-mode rendering.
 pub(crate) fn render_samples<F>(
     scene: &Scene,
     opts: &RenderOptions,
@@ -78,83 +209,31 @@ pub(crate) fn render_samples<F>(
 where
     F: Fn(Ray, &mut SampleStream, &mut [f32]) + Sync,
 {
-    let sensor = &scene.sensor;
-    let film = &sensor.film;
-    let sampler = &sensor.sampler;
-    let spp = opts.spp.unwrap_or_else(|| sampler.sample_count());
-    if spp == 0 {
-        return Err(Error::Invalid("spp must be at least 1".into()));
-    }
-    let filter = &film.rfilter;
-    let margin = filter.border() as i64;
-    let (cw, ch) = (film.crop_size.0 as i64, film.crop_size.1 as i64);
-    // region whose pixels receive samples
-    let b = if film.sample_border { margin } else { 0 };
-    let (rx0, ry0, rw, rh) = (-b, -b, cw + 2 * b, ch + 2 * b);
-    let tiles_x = (rw as usize).div_ceil(TILE);
-    let tiles_y = (rh as usize).div_ceil(TILE);
-    let n_tiles = tiles_x * tiles_y;
-    let done = AtomicUsize::new(0);
-    let inv_size = Vec2::new(1.0 / film.width as f32, 1.0 / film.height as f32);
-    let crop_off = Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32);
-    let lens = sensor.needs_aperture_sample();
-
-    let render_tile = |t: usize| -> Option<ImageBlock> {
-        if let Some(c) = &opts.cancel {
-            if c.load(Ordering::Relaxed) {
-                return None;
-            }
-        }
-        let tx0 = rx0 + ((t % tiles_x) * TILE) as i64;
-        let ty0 = ry0 + ((t / tiles_x) * TILE) as i64;
-        let tw = (TILE as i64).min(rx0 + rw - tx0);
-        let th = (TILE as i64).min(ry0 + rh - ty0);
+    let layout = SampleLayout::new(scene, opts)?;
+    let filter = &scene.sensor.film.rfilter;
+    let m = layout.margin;
+    let blocks = layout.map_tiles(opts, |tile| {
         let mut block = ImageBlock::new(
-            tx0 - margin,
-            ty0 - margin,
-            (tw + 2 * margin) as usize,
-            (th + 2 * margin) as usize,
+            tile.x0 - m,
+            tile.y0 - m,
+            (tile.w + 2 * m) as usize,
+            (tile.h + 2 * m) as usize,
             channels,
         );
         let mut out = vec![0.0f32; channels];
-        for y in ty0..ty0 + th {
-            for x in tx0..tx0 + tw {
-                // a key per film pixel (border pixels included)
-                let pixel = ((y + 0x8000) as u64) << 32 | (x + 0x8000) as u64;
-                for s in 0..spp {
-                    let mut rng = sampler.stream(opts.seed, pixel, s, spp);
-                    let u = rng.next_2d();
-                    let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
-                    let lens_u = if lens { rng.next_2d() } else { Vec2::ZERO };
-                    let ray = sensor.sample_ray((pos + crop_off) * inv_size, lens_u);
-                    out.fill(0.0);
-                    sample(ray, &mut rng, &mut out);
-                    if out.iter().all(|v| v.is_finite()) {
-                        block.put(filter, pos.x, pos.y, &out);
-                    }
-                }
+        layout.for_each_sample(tile, |pos, ray, rng| {
+            out.fill(0.0);
+            sample(ray, rng, &mut out);
+            if out.iter().all(|v| v.is_finite()) {
+                block.put(filter, pos.x, pos.y, &out);
             }
-        }
-        let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-        if let Some(p) = &opts.progress {
-            p(k, n_tiles);
-        }
-        Some(block)
-    };
-
-    let run =
-        || -> Vec<Option<ImageBlock>> { (0..n_tiles).into_par_iter().map(render_tile).collect() };
-    let blocks = match opts.threads {
-        Some(n) => rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build()
-            .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?
-            .install(run),
-        None => run(),
-    };
-    let mut image = ImageBlock::new(0, 0, cw as usize, ch as usize, channels);
-    for b in blocks {
-        image.accumulate(&b.ok_or(Error::Interrupted)?);
+        });
+        block
+    })?;
+    let (cw, ch) = layout.size();
+    let mut image = ImageBlock::new(0, 0, cw, ch, channels);
+    for b in &blocks {
+        image.accumulate(b);
     }
     Ok(image)
 }

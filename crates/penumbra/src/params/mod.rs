@@ -96,6 +96,9 @@ pub struct Param {
     pub tangent: Option<Vec<f32>>,
     /// Set by [`ParamStore::set`]; cleared when dependants were updated.
     pub dirty: bool,
+    /// Reverse mode records reads of this parameter (set by
+    /// `render_backward` for the parameters whose gradients it returns).
+    pub grad_enabled: bool,
 }
 
 /// All parameters of a scene.
@@ -139,6 +142,7 @@ impl ParamStore {
             domain,
             tangent: None,
             dirty: false,
+            grad_enabled: false,
         });
         Ok(id)
     }
@@ -285,6 +289,16 @@ impl ParamStore {
         }
         p.tangent = Some(tangent.to_vec());
         Ok(())
+    }
+
+    /// Enables reverse-mode recording for exactly the parameters in `ids`.
+    pub fn set_grad_enabled(&mut self, ids: &[ParamId]) {
+        for p in &mut self.params {
+            p.grad_enabled = false;
+        }
+        for id in ids {
+            self.params[id.0 as usize].grad_enabled = true;
+        }
     }
 
     pub fn clear_tangents(&mut self) {

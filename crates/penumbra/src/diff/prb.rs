@@ -1,0 +1,254 @@
+//! Reverse mode by path replay (Vicini et al. 2021, "Path Replay
+//! Backpropagation", Algorithm 2; after Nimier-David et al. 2020,
+//! "Radiative Backpropagation").
+//!
+//! For each sample, the primal path is traced once (f32) to get its
+//! radiance L; then the same path is replayed with the same random numbers
+//! on [`Var`]s carrying the adjoint radiance δL = ∂loss/∂L. At every vertex
+//! only the local terms are recorded: the radiance this vertex adds
+//! (emission, next-event estimation) and the weight `w` of the scattering
+//! that continues the path; the rest of the path's radiance, `L_rem`, is
+//! known from the primal value (`L` minus what earlier vertices added), so
+//! the vertex's derivative is that of `local(θ) + L_rem · w(θ) / w`. The
+//! throughput is detached. Memory is the parameter and image buffers only,
+//! whatever the path length and sample count.
+
+use super::check_no_discontinuous;
+use crate::ad::reverse::{backward, clear_tape};
+use crate::ad::{Real, Var};
+use crate::error::{Error, Result};
+use crate::image::ImageBlock;
+use crate::integrator::path::{Accumulate, PathSink};
+use crate::integrator::render::SampleLayout;
+use crate::integrator::{Integrator, RenderOptions};
+use crate::math::{Spectrum, V3};
+use crate::params::ParamId;
+use crate::scene::Scene;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// Gradients of a loss with respect to scene parameters, shaped like the
+/// parameters.
+#[derive(Clone, Debug, Default)]
+pub struct Gradients {
+    pub entries: Vec<GradEntry>,
+}
+
+#[derive(Clone, Debug)]
+pub struct GradEntry {
+    pub key: String,
+    pub shape: Vec<usize>,
+    pub data: Vec<f32>,
+}
+
+impl Gradients {
+    pub fn get(&self, key: &str) -> Option<&[f32]> {
+        self.entries
+            .iter()
+            .find(|e| e.key == key)
+            .map(|e| e.data.as_slice())
+    }
+}
+
+/// Per-tile gradient sums, keyed by (parameter, element); merged in tile
+/// order so the result does not depend on the thread count.
+type TileGrads = HashMap<(u32, u32), f64>;
+
+/// The path-replay sink: records one vertex at a time and backpropagates.
+struct Replay<'a> {
+    /// Radiance of the path still to come (primal).
+    l_rem: Vec3,
+    /// ∂loss/∂L of this sample.
+    delta: Vec3,
+    /// This vertex's radiance contributions, recorded.
+    local: Spectrum<Var>,
+    grads: &'a mut TileGrads,
+}
+
+impl PathSink<Var> for Replay<'_> {
+    fn add(&mut self, l: Spectrum<Var>) {
+        self.local += l;
+    }
+
+    fn next_throughput(&mut self, throughput: Spectrum<Var>, w: Spectrum<Var>) -> Spectrum<Var> {
+        // detached: derivatives of the weights are taken at their vertex
+        V3::cst(throughput.val() * w.val())
+    }
+
+    fn end_vertex(&mut self, w: Option<Spectrum<Var>>) {
+        self.l_rem -= self.local.val();
+        let mut objective = self.local;
+        if let Some(w) = w {
+            // L_rem · w(θ) / w: the later radiance scales with this weight
+            let scale = |w: Var, l: f32| {
+                let wv = w.val();
+                if wv != 0.0 && w.is_attached() {
+                    w * (l / wv)
+                } else {
+                    Var::cst(0.0)
+                }
+            };
+            objective += V3::new(
+                scale(w.x, self.l_rem.x),
+                scale(w.y, self.l_rem.y),
+                scale(w.z, self.l_rem.z),
+            );
+        }
+        let grads = &mut *self.grads;
+        backward(
+            &[
+                (objective.x, self.delta.x),
+                (objective.y, self.delta.y),
+                (objective.z, self.delta.z),
+            ],
+            |id, i, g| *grads.entry((id.0, i as u32)).or_default() += g as f64,
+        );
+        self.local = Spectrum::zero();
+    }
+}
+
+/// Gradients of a loss with respect to scene parameters, given
+/// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major),
+/// by path replay with the same random numbers as
+/// [`crate::integrator::render`] with the same options. `keys` selects
+/// the parameters (default: every differentiable, non-geometric one).
+pub fn render_backward(
+    scene: &mut Scene,
+    d_image: &[f32],
+    keys: Option<&[&str]>,
+    opts: &RenderOptions,
+) -> Result<Gradients> {
+    let Integrator::Path(path) = scene.integrator.clone() else {
+        return Err(Error::Invalid(
+            "reverse mode (path replay) needs the path integrator".into(),
+        ));
+    };
+    let (cw, ch) = scene.sensor.film.crop_size;
+    if d_image.len() != cw * ch * 3 {
+        return Err(Error::Invalid(format!(
+            "the image gradient must have {ch}x{cw}x3 = {} values (the rendered image's shape), got {}",
+            cw * ch * 3,
+            d_image.len()
+        )));
+    }
+    if let Some(i) = d_image.iter().position(|v| !v.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "the image gradient has a non-finite value at index {i}"
+        )));
+    }
+    let ids: Vec<ParamId> = match keys {
+        Some(keys) => {
+            check_no_discontinuous(scene, keys)?;
+            keys.iter()
+                .map(|k| {
+                    let id = scene.params.require(k)?;
+                    if !scene.params.get(id).flags.differentiable {
+                        return Err(Error::Param {
+                            key: k.to_string(),
+                            msg: "this parameter is not differentiable".into(),
+                        });
+                    }
+                    Ok(id)
+                })
+                .collect::<Result<_>>()?
+        }
+        None => scene
+            .params
+            .iter()
+            .filter(|(_, p)| p.flags.differentiable && !p.flags.discontinuous)
+            .map(|(id, _)| id)
+            .collect(),
+    };
+    scene.params.set_grad_enabled(&ids);
+    let result = backward_pass(scene, &path, d_image, opts);
+    scene.params.set_grad_enabled(&[]);
+    let sums = result?;
+    Ok(Gradients {
+        entries: ids
+            .iter()
+            .map(|&id| {
+                let p = scene.params.get(id);
+                GradEntry {
+                    key: p.key.clone(),
+                    shape: p.shape.clone(),
+                    data: sums[id.0 as usize].iter().map(|&g| g as f32).collect(),
+                }
+            })
+            .collect(),
+    })
+}
+
+fn backward_pass(
+    scene: &Scene,
+    path: &crate::integrator::PathIntegrator,
+    d_image: &[f32],
+    opts: &RenderOptions,
+) -> Result<Vec<Vec<f64>>> {
+    let layout = SampleLayout::new(scene, opts)?;
+    let filter = &scene.sensor.film.rfilter;
+    let (cw, ch) = layout.size();
+
+    // 1. total filter weight per pixel (positions only: no tracing)
+    let m = layout.margin;
+    let weight_blocks = layout.map_tiles(opts, |tile| {
+        let mut block = ImageBlock::new(
+            tile.x0 - m,
+            tile.y0 - m,
+            (tile.w + 2 * m) as usize,
+            (tile.h + 2 * m) as usize,
+            0,
+        );
+        layout.for_each_sample(tile, |pos, _, _| block.put(filter, pos.x, pos.y, &[]));
+        block
+    })?;
+    let mut weights = ImageBlock::new(0, 0, cw, ch, 0);
+    for b in &weight_blocks {
+        weights.accumulate(b);
+    }
+
+    // 2. replay every sample with its adjoint radiance
+    let tiles = layout.map_tiles(opts, |tile| {
+        let mut grads = TileGrads::new();
+        let mut delta = [0.0f32; 3];
+        layout.for_each_sample(tile, |pos, ray, rng| {
+            weights.gather_adjoint(filter, pos.x, pos.y, d_image, &mut delta);
+            if delta == [0.0; 3] {
+                return;
+            }
+            let mut replay_rng = rng.clone();
+            let mut primal = Accumulate(Spectrum::<f32>::zero());
+            path.trace(scene, ray, rng, &mut primal);
+            if !primal.0.is_finite() {
+                return;
+            }
+            clear_tape();
+            let mut replay = Replay {
+                l_rem: primal.0.val(),
+                delta: Vec3::from(delta),
+                local: Spectrum::zero(),
+                grads: &mut grads,
+            };
+            path.trace::<Var, _>(scene, ray, &mut replay_rng, &mut replay);
+        });
+        grads
+    })?;
+    let mut sums: Vec<Vec<f64>> = scene
+        .params
+        .iter()
+        .map(|(_, p)| {
+            if p.grad_enabled {
+                vec![0.0; p.data.len()]
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    // each tile holds one sum per element: adding tiles in tile order
+    // fixes the summation order
+    for t in tiles {
+        for ((id, i), g) in t {
+            sums[id as usize][i as usize] += g;
+        }
+    }
+    Ok(sums)
+}
