@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use penumbra::diff::{check_gradient, CheckOptions, Estimate};
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
@@ -46,6 +47,31 @@ enum Command {
         /// No progress bar or timing report.
         #[arg(short, long)]
         quiet: bool,
+    },
+    /// Check derivatives: finite differences (same random numbers) vs
+    /// forward mode vs reverse mode, per parameter, over several batches.
+    /// Prints a table and writes the derivative images.
+    CheckGrad {
+        scene: PathBuf,
+        /// Parameter key (repeatable), e.g. red.reflectance.value.
+        #[arg(long = "param", required = true)]
+        params: Vec<String>,
+        /// Samples per pixel of each batch.
+        #[arg(long, default_value_t = 16)]
+        spp: u32,
+        /// Independent batches for the error bars.
+        #[arg(long, default_value_t = 4)]
+        batches: u32,
+        /// Relative finite-difference step.
+        #[arg(long, default_value_t = 1e-2)]
+        eps: f32,
+        /// Folder for the derivative images (EXR).
+        #[arg(short, long, default_value = "check-grad")]
+        output: PathBuf,
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Time renders of a scene in one process: the first render and the
     /// following (warm) ones, with peak memory; prints one JSON line.
@@ -173,6 +199,76 @@ fn run(cli: Cli) -> Result<(), String> {
                     t_load.as_secs_f64(),
                     t_render.as_secs_f64()
                 );
+            }
+            Ok(())
+        }
+        Command::CheckGrad {
+            scene,
+            params,
+            spp,
+            batches,
+            eps,
+            output,
+            define,
+            threads,
+        } => {
+            let defines = parse_defines(&define)?;
+            let mut scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            std::fs::create_dir_all(&output)
+                .map_err(|e| format!("{}: cannot create folder: {e}", output.display()))?;
+            let opts = CheckOptions {
+                spp,
+                batches,
+                eps,
+                threads,
+            };
+            println!(
+                "d/ds Σ image along θ·(1+s), {batches} batches × {spp} spp (mean ± standard error)"
+            );
+            println!(
+                "{:<40} {:>24} {:>24} {:>24} {:>8} {:>8}",
+                "parameter", "finite differences", "forward", "reverse", "z(f,fd)", "z(r,fd)"
+            );
+            let mut worst = 0.0f64;
+            for key in &params {
+                let r = check_gradient(&mut scene, key, &opts).map_err(|e| e.to_string())?;
+                let fmt = |e: &Estimate| format!("{:.5e} ± {:.1e}", e.mean, e.std_err);
+                let (zf, zr) = (
+                    r.forward.z_score(&r.finite_differences),
+                    r.reverse.z_score(&r.finite_differences),
+                );
+                worst = worst.max(zf).max(zr);
+                println!(
+                    "{:<40} {:>24} {:>24} {:>24} {:>8.2} {:>8.2}",
+                    key,
+                    fmt(&r.finite_differences),
+                    fmt(&r.forward),
+                    fmt(&r.reverse),
+                    zf,
+                    zr
+                );
+                for (name, img) in [("fd", &r.fd_image), ("forward", &r.forward_image)] {
+                    let file = output.join(format!("{key}.{name}.exr"));
+                    let image = Image {
+                        width: img.width,
+                        height: img.height,
+                        channels: 3,
+                        data: img.data.clone(),
+                    };
+                    write_exr(&file, &image, &["R", "G", "B"]).map_err(|e| e.to_string())?;
+                }
+            }
+            println!(
+                "derivative images in {}; largest z-score {worst:.2} ({})",
+                output.display(),
+                if worst < 4.0 {
+                    "agree within noise"
+                } else {
+                    "DISAGREE beyond noise"
+                }
+            );
+            if worst >= 4.0 {
+                return Err("gradients disagree beyond their noise".into());
             }
             Ok(())
         }

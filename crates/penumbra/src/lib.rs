@@ -16,6 +16,7 @@ pub mod geometry;
 pub mod image;
 pub mod integrator;
 pub mod math;
+pub mod optim;
 pub mod params;
 pub mod sampler;
 pub mod scene;

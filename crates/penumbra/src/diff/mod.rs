@@ -4,9 +4,11 @@
 //! the parameters; reverse mode gives gradients for every differentiable
 //! parameter.
 
+mod check;
 mod forward;
 mod prb;
 
+pub use check::{check_gradient, CheckOptions, CheckReport, Estimate};
 pub use forward::render_forward;
 pub use prb::{render_backward, GradEntry, Gradients};
 
