@@ -195,7 +195,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     output.display(),
                     image.width,
                     image.height,
-                    spp.unwrap_or_else(|| scene.sensor.sampler.sample_count()),
+                    spp.unwrap_or_else(|| scene.sensors[0].sampler.sample_count()),
                     t_load.as_secs_f64(),
                     t_render.as_secs_f64()
                 );
@@ -312,7 +312,7 @@ fn run(cli: Cli) -> Result<(), String> {
             println!(
                 "{{\"scene\": \"{}\", \"spp\": {}, \"load_s\": {load_s:.4}, \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
                 scene.display(),
-                spp.unwrap_or_else(|| loaded.sensor.sampler.sample_count()),
+                spp.unwrap_or_else(|| loaded.sensors[0].sampler.sample_count()),
                 times[0],
                 peak_rss_mb()
             );

@@ -123,7 +123,7 @@ pub fn render_backward(
             "reverse mode (path replay) needs the path integrator".into(),
         ));
     };
-    let (cw, ch) = scene.sensor.film.crop_size;
+    let (cw, ch) = scene.sensor(opts.sensor)?.film.crop_size;
     if d_image.len() != cw * ch * 3 {
         return Err(Error::Invalid(format!(
             "the image gradient must have {ch}x{cw}x3 = {} values (the rendered image's shape), got {}",
@@ -185,7 +185,7 @@ fn backward_pass(
     opts: &RenderOptions,
 ) -> Result<Vec<Vec<f64>>> {
     let layout = SampleLayout::new(scene, opts)?;
-    let filter = &scene.sensor.film.rfilter;
+    let filter = &layout.sensor.film.rfilter;
     let (cw, ch) = layout.size();
 
     // 1. total filter weight per pixel (positions only: no tracing)

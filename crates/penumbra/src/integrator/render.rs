@@ -8,6 +8,7 @@ use crate::geometry::Ray;
 use crate::image::ImageBlock;
 use crate::sampler::SampleStream;
 use crate::scene::Scene;
+use crate::sensor::Sensor;
 use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -26,6 +27,8 @@ pub struct RenderOptions {
     pub spp: Option<u32>,
     /// Seed of all random numbers (combined with the sampler's own seed).
     pub seed: u64,
+    /// Which of the scene's sensors to render (default: the first).
+    pub sensor: usize,
     /// Worker threads (default: all cores).
     pub threads: Option<usize>,
     pub progress: Option<Arc<ProgressFn>>,
@@ -78,7 +81,7 @@ pub(crate) struct Tile {
 /// Everything that fixes where samples go: shared by all passes over the
 /// image so that they draw exactly the same samples.
 pub(crate) struct SampleLayout<'a> {
-    scene: &'a Scene,
+    pub sensor: &'a Sensor,
     pub spp: u32,
     seed: u64,
     inv_size: Vec2,
@@ -93,10 +96,9 @@ pub(crate) struct SampleLayout<'a> {
 
 impl<'a> SampleLayout<'a> {
     pub fn new(scene: &'a Scene, opts: &RenderOptions) -> Result<SampleLayout<'a>> {
-        let film = &scene.sensor.film;
-        let spp = opts
-            .spp
-            .unwrap_or_else(|| scene.sensor.sampler.sample_count());
+        let sensor = scene.sensor(opts.sensor)?;
+        let film = &sensor.film;
+        let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
         if spp == 0 {
             return Err(Error::Invalid("spp must be at least 1".into()));
         }
@@ -104,12 +106,12 @@ impl<'a> SampleLayout<'a> {
         let b = if film.sample_border { margin } else { 0 };
         let (cw, ch) = (film.crop_size.0 as i64, film.crop_size.1 as i64);
         Ok(SampleLayout {
-            scene,
+            sensor,
             spp,
             seed: opts.seed,
             inv_size: Vec2::new(1.0 / film.width as f32, 1.0 / film.height as f32),
             crop_off: Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32),
-            lens: scene.sensor.needs_aperture_sample(),
+            lens: sensor.needs_aperture_sample(),
             region: Tile {
                 x0: -b,
                 y0: -b,
@@ -122,14 +124,14 @@ impl<'a> SampleLayout<'a> {
 
     /// Crop-window size.
     pub fn size(&self) -> (usize, usize) {
-        self.scene.sensor.film.crop_size
+        self.sensor.film.crop_size
     }
 
     /// Calls `f(film position, camera ray, sample stream)` for every sample
     /// of every pixel of `tile`, in a fixed order.
     #[inline]
     pub fn for_each_sample(&self, tile: Tile, mut f: impl FnMut(Vec2, Ray, &mut SampleStream)) {
-        let sensor = &self.scene.sensor;
+        let sensor = self.sensor;
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 // a key per film pixel (border pixels included)
@@ -210,7 +212,7 @@ where
     F: Fn(Ray, &mut SampleStream, &mut [f32]) + Sync,
 {
     let layout = SampleLayout::new(scene, opts)?;
-    let filter = &scene.sensor.film.rfilter;
+    let filter = &layout.sensor.film.rfilter;
     let m = layout.margin;
     let blocks = layout.map_tiles(opts, |tile| {
         let mut block = ImageBlock::new(

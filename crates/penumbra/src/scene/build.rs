@@ -162,7 +162,7 @@ impl Scene {
             bsdfs: b.bsdfs,
             emitters: b.emitters,
             environment: b.environment,
-            sensor: b.sensors.swap_remove(0),
+            sensors: b.sensors,
             integrator: b.integrator.unwrap_or(Integrator::Path(PathIntegrator {
                 max_depth: u32::MAX,
                 rr_depth: 5,

@@ -75,7 +75,8 @@ pub struct Scene {
     pub emitters: Vec<Emitter>,
     /// The environment emitter (constant, envmap), if any.
     pub environment: Option<u32>,
-    pub sensor: Sensor,
+    /// The sensors, in file order (`RenderOptions::sensor` picks one).
+    pub sensors: Vec<Sensor>,
     pub integrator: Integrator,
     pub accel: Accel,
 }
@@ -92,6 +93,16 @@ impl Scene {
     pub fn load_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene> {
         let root = xml::parse_str(text, path, defines)?;
         Scene::from_root(&root)
+    }
+
+    /// Sensor `i`, or an error naming how many there are.
+    pub fn sensor(&self, i: usize) -> Result<&Sensor> {
+        self.sensors.get(i).ok_or_else(|| {
+            Error::Invalid(format!(
+                "sensor {i} does not exist: the scene has {} sensor(s)",
+                self.sensors.len()
+            ))
+        })
     }
 
     #[inline]
