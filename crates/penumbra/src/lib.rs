@@ -12,6 +12,7 @@ pub mod bsdf;
 pub mod emitter;
 pub mod error;
 pub mod geometry;
+pub mod image;
 pub mod math;
 pub mod params;
 pub mod scene;
