@@ -59,7 +59,12 @@ fn read_exr(path: &Path) -> Result<Image> {
         if samples.len() != w * h {
             return Err(Error::file(
                 path,
-                format!("channel '{}' has {} samples, expected {}", names[ci], samples.len(), w * h),
+                format!(
+                    "channel '{}' has {} samples, expected {}",
+                    names[ci],
+                    samples.len(),
+                    w * h
+                ),
             ));
         }
         for (i, v) in samples.values_as_f32().enumerate() {
@@ -130,7 +135,10 @@ fn check_layout(path: &Path, img: &Image) -> Result<()> {
 /// image channel (e.g. `["R", "G", "B"]`, or `["R", "G", "B", "depth.Y"]`
 /// for AOVs).
 pub fn write_exr(path: &Path, img: &Image, channel_names: &[&str]) -> Result<()> {
-    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage};
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec,
+        WritableImage,
+    };
     check_layout(path, img)?;
     if channel_names.len() != img.channels {
         return Err(Error::file(
@@ -195,7 +203,11 @@ pub fn write_png(path: &Path, img: &Image) -> Result<()> {
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let v = if is_alpha(i % c) { v } else { linear_to_srgb(v) };
+            let v = if is_alpha(i % c) {
+                v
+            } else {
+                linear_to_srgb(v)
+            };
             let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
             (v * 255.0).round() as u8
         })
@@ -285,7 +297,10 @@ mod tests {
         assert_eq!(back.data, img.take_channels(4).data);
         // wrong name count and duplicates are errors naming the path
         let e = write_exr(&p, &img, &["R", "G"]).unwrap_err().to_string();
-        assert!(e.contains("aov.exr") && e.contains("2 channel names"), "{e}");
+        assert!(
+            e.contains("aov.exr") && e.contains("2 channel names"),
+            "{e}"
+        );
         let e = write_exr(&p, &img, &["R", "R", "B", "A", "Z"])
             .unwrap_err()
             .to_string();
@@ -319,7 +334,10 @@ mod tests {
         let e = write_image(Path::new("/tmp/x.tiff"), &img)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("/tmp/x.tiff") && e.contains("unknown image extension"), "{e}");
+        assert!(
+            e.contains("/tmp/x.tiff") && e.contains("unknown image extension"),
+            "{e}"
+        );
         let e = read_image(Path::new("/nonexistent/a.exr"))
             .unwrap_err()
             .to_string();
