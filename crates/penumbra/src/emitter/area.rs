@@ -136,3 +136,144 @@ impl EmitterT for Area {
         false
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ad::Dual;
+    use crate::emitter::test_util::{node, CHI2_ALPHA};
+    use crate::emitter::{surface_si, Emitter};
+    use crate::scene::Value;
+    use crate::testing::Chi2Test;
+
+    /// A 2 × 3 rectangle centred at (0, 0, 1) facing −z, sampled uniformly
+    /// by area (stands in for a shape's `sample_position`).
+    const C: Vec3 = Vec3::new(0.0, 0.0, 1.0);
+    const EX: Vec3 = Vec3::new(1.0, 0.0, 0.0);
+    const EY: Vec3 = Vec3::new(0.0, 1.5, 0.0);
+    const N: Vec3 = Vec3::new(0.0, 0.0, -1.0);
+    const AREA: f32 = 6.0;
+
+    fn sample_rect(u: Vec2) -> PositionSample {
+        PositionSample {
+            p: C + EX * (2.0 * u.x - 1.0) + EY * (2.0 * u.y - 1.0),
+            n: N,
+            uv: u,
+            pdf: 1.0 / AREA,
+            prim: 0,
+        }
+    }
+
+    /// Where the ray from `o` along `d` meets the rectangle, if it does.
+    fn hit_rect(o: Vec3, d: Vec3) -> Option<Vec3> {
+        let t = (C - o).dot(N) / d.dot(N);
+        if !(t > 0.0) {
+            return None;
+        }
+        let p = o + d * t;
+        let q = p - C;
+        (q.dot(EX).abs() <= EX.length_squared() && q.dot(EY).abs() <= EY.length_squared())
+            .then_some(p)
+    }
+
+    fn make() -> (Area, LoadContext) {
+        let mut ctx = LoadContext::default();
+        let n = node(
+            "area",
+            "light.emitter",
+            vec![("radiance", Value::Rgb(Vec3::new(4.0, 2.0, 1.0)))],
+        );
+        let Emitter::Area(a) = Emitter::from_node(&n, Some(3), &mut ctx).unwrap() else {
+            panic!("not an area emitter")
+        };
+        assert_eq!(a.shape, 3);
+        (a, ctx)
+    }
+
+    #[test]
+    fn solid_angle_sampling_matches_pdf() {
+        let (a, ctx) = make();
+        let s = &ctx.store;
+        let ref_p = Vec3::new(0.2, -0.1, 0.0);
+        let test = Chi2Test {
+            integration_res: 24,
+            ..Chi2Test::default()
+        };
+        let r = test.run(
+            |rng| {
+                let ps = sample_rect(rng.next_2d());
+                let (ds, w) = a.sample_from_position::<f32>(s, &ps, ref_p)?;
+                let pdf = Area::pdf_from_area(1.0 / AREA, ref_p, ds.d, ds.p, ds.n);
+                assert!((pdf - ds.pdf).abs() <= 1e-4 * pdf);
+                assert!(!ds.delta && (ds.dist - (ds.p - ref_p).length()).abs() < 1e-5);
+                // weight = L / pdf, with L evaluated as a ray hitting ds.p sees it
+                let si = surface_si::<f32>(ds.p, ds.n, ps.uv, -ds.d, 3, 0);
+                let l = a.eval_surface(s, &si).val();
+                assert!((w.val() * pdf - l).abs().max_element() < 1e-4 * l.max_element());
+                Some(ds.d)
+            },
+            |d| match hit_rect(ref_p, d) {
+                Some(p) => Area::pdf_from_area(1.0 / AREA, ref_p, d, p, N),
+                None => 0.0,
+            },
+        );
+        assert!(r.p_value > CHI2_ALPHA, "{r:?}");
+        assert!((r.pdf_integral - 1.0).abs() < 1e-2, "{r:?}");
+    }
+
+    #[test]
+    fn one_sided_emission() {
+        let (a, ctx) = make();
+        let s = &ctx.store;
+        // behind the emitting side: nothing to sample
+        let behind = Vec3::new(0.0, 0.0, 2.0);
+        assert!(a
+            .sample_from_position::<f32>(s, &sample_rect(Vec2::splat(0.3)), behind)
+            .is_none());
+        assert_eq!(Area::pdf_from_area(1.0 / AREA, behind, -Vec3::Z, C, N), 0.0);
+        let front = surface_si::<f32>(C, N, Vec2::ZERO, -Vec3::Z, 3, 0);
+        let back = surface_si::<f32>(C, N, Vec2::ZERO, Vec3::Z, 3, 0);
+        assert_eq!(a.eval_surface(s, &front).val(), Vec3::new(4.0, 2.0, 1.0));
+        assert_eq!(a.eval_surface(s, &back).val(), Vec3::ZERO);
+    }
+
+    #[test]
+    fn radiance_key_and_derivative() {
+        let (a, mut ctx) = make();
+        ctx.store
+            .set_tangent("light.emitter.radiance.value", &[0.0, 0.0, 1.0])
+            .unwrap();
+        let ps = sample_rect(Vec2::new(0.5, 0.5));
+        let (ds, w) = a
+            .sample_from_position::<Dual>(&ctx.store, &ps, Vec3::ZERO)
+            .unwrap();
+        assert!((w.z.d - 1.0 / ds.pdf).abs() < 1e-5 && w.x.d == 0.0);
+        // straight below the centre: pdf = dist² / (A cos θ) = 1/6
+        assert!((ds.pdf - 1.0 / 6.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn attachment_rules() {
+        let mut ctx = LoadContext::default();
+        let e = Emitter::from_node(&node("area", "x", vec![]), None, &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nested inside a shape"), "{e}");
+        let e = Emitter::from_node(&node("point", "y", vec![]), Some(0), &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot be attached"), "{e}");
+        let e = Emitter::from_node(
+            &node("area", "z", vec![("radience", Value::Float(1.0))]),
+            Some(0),
+            &mut ctx,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("unknown parameter 'radience'"), "{e}");
+        let e = Emitter::from_node(&node("sun", "w", vec![]), None, &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown emitter plugin 'sun'"), "{e}");
+    }
+}
