@@ -174,7 +174,7 @@ fn run(cli: Cli) -> Result<(), String> {
                         b.set_position(done as u64);
                     }) as Arc<_>
                 }),
-                cancel: None,
+                ..Default::default()
             };
             let t1 = Instant::now();
             let img = render(&scene, &opts).map_err(|e| e.to_string())?;

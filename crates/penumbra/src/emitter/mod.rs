@@ -1,13 +1,88 @@
 //! The emitter family. Radiance is RGB; sampling is detached (f32), the
 //! returned weights (`radiance / pdf`) are differentiable in `R`.
 
+mod area;
+mod constant;
+mod directional;
+mod envmap;
+mod point;
+mod spot;
+
+pub use area::Area;
+pub use constant::Constant;
+pub use directional::Directional;
+pub use envmap::Envmap;
+pub use point::Point;
+pub use spot::Spot;
+
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
-use crate::math::Spectrum;
-use crate::params::ParamStore;
+use crate::math::{Frame, Spectrum, V2, V3};
+use crate::params::{ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
+use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
+
+/// A sphere enclosing the scene: environment and directional emitters
+/// place their sample points outside it.
+#[derive(Clone, Copy, Debug)]
+pub struct BoundingSphere {
+    pub center: Vec3,
+    pub radius: f32,
+}
+
+impl Default for BoundingSphere {
+    /// The unit sphere (Mitsuba's default until the scene is known).
+    fn default() -> Self {
+        BoundingSphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        }
+    }
+}
+
+/// A point beyond the scene from `ref_p` along unit `d`: at twice the
+/// larger of the bounding radius and the distance of `ref_p` from its
+/// centre (as Mitsuba places environment samples).
+#[inline]
+pub(crate) fn far_point(bs: &BoundingSphere, ref_p: Vec3, d: Vec3) -> Vec3 {
+    let r = bs.radius.max((ref_p - bs.center).length());
+    ref_p + d * (2.0 * r)
+}
+
+/// A surface interaction at an emitter point (for texture lookups by uv):
+/// position `p`, unit normal `n`, `wi_world` the unit direction leaving
+/// the surface.
+pub(crate) fn surface_si<R: Real>(
+    p: Vec3,
+    n: Vec3,
+    uv: Vec2,
+    wi_world: Vec3,
+    shape: u32,
+    prim: u32,
+) -> SurfaceInteraction<R> {
+    let frame = Frame::from_normal(V3::cst(n));
+    let wi = frame.to_local(V3::cst(wi_world));
+    SurfaceInteraction {
+        t: R::cst(0.0),
+        p: V3::cst(p),
+        n: V3::cst(n),
+        sh_frame: frame,
+        uv: V2::cst(uv),
+        wi,
+        shape,
+        prim,
+    }
+}
+
+/// A texture evaluated where position does not matter (uniform values of
+/// point, spot, directional and constant emitters): at uv = (0, 0).
+#[inline]
+pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamStore) -> Spectrum<R> {
+    let si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
+    t.eval(store, &si)
+}
 
 /// A direction sampled towards an emitter from a reference point.
 #[derive(Clone, Copy, Debug)]
@@ -64,52 +139,173 @@ pub trait EmitterT {
 
 /// All emitter plugins.
 #[derive(Clone, Debug)]
-pub enum Emitter {}
+pub enum Emitter {
+    Area(Area),
+    Point(Point),
+    Spot(Spot),
+    Directional(Directional),
+    Constant(Constant),
+    Envmap(Envmap),
+}
+
+macro_rules! dispatch {
+    ($self:expr, $e:ident => $body:expr) => {
+        match $self {
+            Emitter::Area($e) => $body,
+            Emitter::Point($e) => $body,
+            Emitter::Spot($e) => $body,
+            Emitter::Directional($e) => $body,
+            Emitter::Constant($e) => $body,
+            Emitter::Envmap($e) => $body,
+        }
+    };
+}
 
 impl EmitterT for Emitter {
+    #[inline]
     fn sample_direction<R: Real>(
         &self,
-        _store: &ParamStore,
-        _shapes: &[Shape],
-        _ref_p: Vec3,
-        _u: Vec2,
+        store: &ParamStore,
+        shapes: &[Shape],
+        ref_p: Vec3,
+        u: Vec2,
     ) -> Option<(DirectionSample, Spectrum<R>)> {
-        match *self {}
+        dispatch!(self, e => e.sample_direction(store, shapes, ref_p, u))
     }
+    #[inline]
     fn pdf_direction(
         &self,
-        _store: &ParamStore,
-        _shapes: &[Shape],
-        _ref_p: Vec3,
-        _d: Vec3,
-        _p: Vec3,
-        _n: Vec3,
+        store: &ParamStore,
+        shapes: &[Shape],
+        ref_p: Vec3,
+        d: Vec3,
+        p: Vec3,
+        n: Vec3,
     ) -> f32 {
-        match *self {}
+        dispatch!(self, e => e.pdf_direction(store, shapes, ref_p, d, p, n))
     }
-    fn eval_surface<R: Real>(
-        &self,
-        _store: &ParamStore,
-        _si: &SurfaceInteraction<R>,
-    ) -> Spectrum<R> {
-        match *self {}
+    #[inline]
+    fn eval_surface<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        dispatch!(self, e => e.eval_surface(store, si))
     }
-    fn eval_environment<R: Real>(&self, _store: &ParamStore, _d: Vec3) -> Spectrum<R> {
-        match *self {}
+    #[inline]
+    fn eval_environment<R: Real>(&self, store: &ParamStore, d: Vec3) -> Spectrum<R> {
+        dispatch!(self, e => e.eval_environment(store, d))
     }
     fn is_delta(&self) -> bool {
-        match *self {}
+        dispatch!(self, e => e.is_delta())
     }
     fn is_environment(&self) -> bool {
-        match *self {}
+        dispatch!(self, e => e.is_environment())
     }
 }
 
 impl Emitter {
-    /// Builds an `<emitter>` node. `shape` is the index of the shape an area
-    /// emitter is attached to (`None` at scene level).
-    pub fn from_node(node: &Node, shape: Option<u32>, _ctx: &mut LoadContext) -> Result<Emitter> {
-        let _ = shape;
-        Err(node.error(format!("unknown emitter plugin '{}'", node.plugin)))
+    /// Builds an `<emitter>` node (and checks that all its parameters were
+    /// used). `shape` is the index of the shape an area emitter is
+    /// attached to (`None` at scene level). Every plugin also accepts
+    /// Mitsuba's `sampling_weight`; [`Emitter::from_node_weighted`]
+    /// returns it.
+    pub fn from_node(node: &Node, shape: Option<u32>, ctx: &mut LoadContext) -> Result<Emitter> {
+        Ok(Emitter::from_node_weighted(node, shape, ctx)?.0)
     }
+
+    /// As [`Emitter::from_node`], also returning Mitsuba's
+    /// `sampling_weight` (default 1), the relative probability of choosing
+    /// this emitter for light sampling.
+    pub fn from_node_weighted(
+        node: &Node,
+        shape: Option<u32>,
+        ctx: &mut LoadContext,
+    ) -> Result<(Emitter, f32)> {
+        let weight = node.float_checked("sampling_weight", 1.0, false)?;
+        let e = match node.plugin.as_str() {
+            "area" => {
+                let Some(shape) = shape else {
+                    return Err(node.error(
+                        "an area emitter must be nested inside a shape (<shape> ... <emitter type=\"area\"> ...)",
+                    ));
+                };
+                Emitter::Area(Area::from_node(node, shape, ctx)?)
+            }
+            "point" => Emitter::Point(Point::from_node(node, ctx)?),
+            "spot" => Emitter::Spot(Spot::from_node(node, ctx)?),
+            "directional" => Emitter::Directional(Directional::from_node(node, ctx)?),
+            "constant" => Emitter::Constant(Constant::from_node(node, ctx)?),
+            "envmap" => Emitter::Envmap(Envmap::from_node(node, ctx)?),
+            _ => {
+                return Err(node.error(format!(
+                    "unknown emitter plugin '{}' (Penumbra has: area, point, spot, directional, constant, envmap)",
+                    node.plugin
+                )))
+            }
+        };
+        if shape.is_some() && !matches!(e, Emitter::Area(_)) {
+            return Err(node.error(format!(
+                "a '{}' emitter cannot be attached to a shape; only 'area' can",
+                node.plugin
+            )));
+        }
+        node.check_all_used()?;
+        Ok((e, weight))
+    }
+
+    /// Tells environment and directional emitters the scene's bounding
+    /// sphere (they place sample points outside it). Call once the scene's
+    /// geometry is known; without it the unit sphere is assumed.
+    pub fn set_scene_bounds(&mut self, center: Vec3, radius: f32) {
+        let bs = BoundingSphere {
+            center,
+            radius: radius.max(crate::math::RAY_EPSILON) * (1.0 + crate::math::RAY_EPSILON),
+        };
+        match self {
+            Emitter::Directional(e) => e.bounds = bs,
+            Emitter::Constant(e) => e.bounds = bs,
+            Emitter::Envmap(e) => e.bounds = bs,
+            _ => {}
+        }
+    }
+
+    /// Refreshes what depends on parameter values (the envmap's sampling
+    /// density) after the parameters `changed` were updated in `store`.
+    pub fn parameters_changed(&mut self, store: &ParamStore, changed: &[ParamId]) {
+        if let Emitter::Envmap(e) = self {
+            if changed.contains(&e.data) {
+                e.rebuild_distribution(store);
+            }
+        }
+    }
+
+    /// The shape an area emitter is attached to.
+    pub fn shape(&self) -> Option<u32> {
+        match self {
+            Emitter::Area(a) => Some(a.shape),
+            _ => None,
+        }
+    }
+}
+
+/// Helpers shared by the emitter tests.
+#[cfg(test)]
+pub(crate) mod test_util {
+    use super::*;
+    use crate::error::SrcLoc;
+    use crate::scene::{Class, Prop, Value};
+
+    /// An `<emitter>` node with the given properties at `test.xml:1`.
+    pub fn node(plugin: &str, key: &str, props: Vec<(&str, Value)>) -> Node {
+        let loc = SrcLoc {
+            file: "/tmp/test.xml".into(),
+            line: 1,
+        };
+        let mut n = Node::new(Class::Emitter, plugin, None, key.into(), loc.clone());
+        for (name, v) in props {
+            n.props.push(Prop::new(name, v, loc.clone()));
+        }
+        n
+    }
+
+    /// p-value threshold of the χ² tests in this module: 10⁻³ spread over
+    /// the (at most 5) sampling tests that run.
+    pub const CHI2_ALPHA: f64 = 1e-3 / 5.0;
 }

@@ -14,4 +14,7 @@ impl Accel {
         false
     }
     pub fn update(&mut self, _s: &[Shape], _p: &ParamStore) {}
+    pub fn bounding_sphere(&self) -> (glam::Vec3, f32) {
+        (glam::Vec3::ZERO, 1.0)
+    }
 }

@@ -98,7 +98,9 @@ pub fn plot_curve(values: &[f64], width: usize, height: usize) -> Image {
     let tf = |v: f64| if log { v.log10() } else { v };
     let (mut lo, mut hi) = finite
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(tf(v)), b.max(tf(v))));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(tf(v)), b.max(tf(v)))
+        });
     if !lo.is_finite() {
         (lo, hi) = (0.0, 1.0);
     }
@@ -112,7 +114,9 @@ pub fn plot_curve(values: &[f64], width: usize, height: usize) -> Image {
     let py = |v: f64| bottom - ((bottom - top) as f64 * (tf(v) - lo) / (hi - lo)).round() as i64;
     // y ticks: decades (log) or 5 steps (linear)
     let ticks: Vec<f64> = if log {
-        (lo as i64..=hi as i64).map(|e| 10f64.powi(e as i32)).collect()
+        (lo as i64..=hi as i64)
+            .map(|e| 10f64.powi(e as i32))
+            .collect()
     } else {
         (0..=4).map(|k| lo + (hi - lo) * k as f64 / 4.0).collect()
     };

@@ -203,7 +203,11 @@ impl Job {
             "sgd" => Method::Sgd {
                 momentum: spec.optimizer.momentum,
             },
-            m => return Err(Error::Invalid(format!("unknown optimizer '{m}' (adam or sgd)"))),
+            m => {
+                return Err(Error::Invalid(format!(
+                    "unknown optimizer '{m}' (adam or sgd)"
+                )))
+            }
         };
         let scene = &mut self.scene;
         let n_views = scene.sensors.len();
@@ -212,7 +216,12 @@ impl Job {
         let truth: Vec<Vec<f32>> = spec
             .params
             .iter()
-            .map(|p| scene.params.require(&p.key).map(|id| scene.params.data(id).to_vec()))
+            .map(|p| {
+                scene
+                    .params
+                    .require(&p.key)
+                    .map(|id| scene.params.data(id).to_vec())
+            })
             .collect::<Result<_>>()?;
         let targets: Vec<Vec<f32>> = if let Some(tspp) = spec.target.render_spp {
             (0..n_views)
@@ -331,7 +340,11 @@ impl Job {
                     channels: c,
                     data: param.data.clone(),
                 };
-                write_exr(&out.join(format!("{}.exr", p.key)), &img, &names[..c.min(3)])?;
+                write_exr(
+                    &out.join(format!("{}.exr", p.key)),
+                    &img,
+                    &names[..c.min(3)],
+                )?;
             }
             let err = if spec.target.render_spp.is_some() {
                 let e = param
@@ -345,7 +358,12 @@ impl Job {
             } else {
                 String::new()
             };
-            let shown: Vec<String> = param.data.iter().take(8).map(|v| format!("{v:.4}")).collect();
+            let shown: Vec<String> = param
+                .data
+                .iter()
+                .take(8)
+                .map(|v| format!("{v:.4}"))
+                .collect();
             summary += &format!(
                 "{} = [{}{}]{err}\n",
                 p.key,

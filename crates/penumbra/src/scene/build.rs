@@ -9,6 +9,7 @@ use crate::error::Result;
 use crate::geometry::accel::Accel;
 use crate::geometry::Shape;
 use crate::integrator::{Integrator, PathIntegrator};
+use crate::math::DiscreteDistribution;
 use crate::sensor::Sensor;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -21,6 +22,8 @@ struct Builder {
     shapes: Vec<Shape>,
     shape_info: Vec<ShapeInfo>,
     emitters: Vec<Emitter>,
+    /// Mitsuba's `sampling_weight` of each emitter.
+    emitter_weights: Vec<f32>,
     environment: Option<u32>,
     sensors: Vec<Sensor>,
     integrator: Option<Integrator>,
@@ -53,8 +56,9 @@ impl Builder {
     }
 
     fn emitter(&mut self, node: &Node, shape: Option<u32>) -> Result<u32> {
-        let e = Emitter::from_node(node, shape, &mut self.ctx)?;
+        let (e, weight) = Emitter::from_node_weighted(node, shape, &mut self.ctx)?;
         node.check_all_used()?;
+        self.emitter_weights.push(weight);
         let i = self.emitters.len() as u32;
         if e.is_environment() {
             if self.environment.is_some() {
@@ -107,6 +111,7 @@ impl Scene {
             shapes: Vec::new(),
             shape_info: Vec::new(),
             emitters: Vec::new(),
+            emitter_weights: Vec::new(),
             environment: None,
             sensors: Vec::new(),
             integrator: None,
@@ -155,7 +160,21 @@ impl Scene {
         }
         let store = b.ctx.store;
         let accel = Accel::build(&b.shapes, &store);
+        let (center, radius) = accel.bounding_sphere();
+        for e in &mut b.emitters {
+            e.set_scene_bounds(center, radius);
+        }
+        let emitter_distribution = if b.emitters.is_empty() {
+            None
+        } else {
+            Some(
+                DiscreteDistribution::new(&b.emitter_weights).ok_or_else(|| {
+                    root.error("all emitters have sampling_weight 0: nothing could be sampled")
+                })?,
+            )
+        };
         Ok(Scene {
+            emitter_distribution,
             params: store,
             shapes: b.shapes,
             shape_info: b.shape_info,

@@ -51,7 +51,7 @@ use crate::emitter::{DirectionSample, Emitter, EmitterT};
 use crate::geometry::accel::Accel;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfaceInteraction};
 use crate::integrator::Integrator;
-use crate::math::Spectrum;
+use crate::math::{DiscreteDistribution, Spectrum};
 use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
 use std::path::Path;
@@ -73,6 +73,8 @@ pub struct Scene {
     pub shape_info: Vec<ShapeInfo>,
     pub bsdfs: Vec<Bsdf>,
     pub emitters: Vec<Emitter>,
+    /// How next-event estimation picks an emitter (by `sampling_weight`).
+    pub emitter_distribution: Option<DiscreteDistribution>,
     /// The environment emitter (constant, envmap), if any.
     pub environment: Option<u32>,
     /// The sensors, in file order (`RenderOptions::sensor` picks one).
@@ -131,7 +133,7 @@ impl Scene {
         self.shape_info[shape as usize].emitter
     }
 
-    /// Samples an emitter uniformly, then a direction towards it from `si`,
+    /// Samples an emitter (by `sampling_weight`), then a direction towards it from `si`,
     /// and tests visibility. Returns the sample and `radiance / pdf`
     /// (including the selection probability), or `None` if occluded.
     pub fn sample_emitter_direction<R: Real>(
@@ -139,13 +141,8 @@ impl Scene {
         si: &SurfaceInteraction<R>,
         u: Vec2,
     ) -> Option<(DirectionSample, Spectrum<R>)> {
-        let n = self.emitters.len();
-        if n == 0 {
-            return None;
-        }
-        let x = u.x * n as f32;
-        let i = (x as usize).min(n - 1);
-        let u = Vec2::new((x - i as f32).min(1.0 - f32::EPSILON), u.y);
+        let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
+        let u = Vec2::new(ux, u.y);
         let p = si.p.val();
         let (mut ds, w) =
             self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, p, u)?;
@@ -160,23 +157,33 @@ impl Scene {
         if self.occluded(&ray) {
             return None;
         }
-        ds.pdf /= n as f32;
-        Some((ds, w * R::cst(n as f32)))
+        ds.pdf *= pick;
+        Some((ds, w * R::cst(1.0 / pick)))
     }
 
     /// Solid-angle density with which [`Scene::sample_emitter_direction`]
     /// picks direction `d` from `ref_p` towards emitter `em`, reaching the
     /// point `p` with normal `n`.
     pub fn pdf_emitter_direction(&self, em: u32, ref_p: Vec3, d: Vec3, p: Vec3, n: Vec3) -> f32 {
-        self.emitters[em as usize].pdf_direction(&self.params, &self.shapes, ref_p, d, p, n)
-            / self.emitters.len() as f32
+        let pick = self
+            .emitter_distribution
+            .as_ref()
+            .map_or(0.0, |dist| dist.pmf(em as usize));
+        self.emitters[em as usize].pdf_direction(&self.params, &self.shapes, ref_p, d, p, n) * pick
     }
 
     /// Applies parameter updates: rebuilds what depends on changed
     /// parameters (the acceleration structure after vertex moves).
     pub fn update(&mut self) {
-        if !self.params.take_dirty().is_empty() {
+        let changed = self.params.take_dirty();
+        if changed
+            .iter()
+            .any(|&id| self.params.get(id).flags.discontinuous)
+        {
             self.accel.update(&self.shapes, &self.params);
+        }
+        for e in &mut self.emitters {
+            e.parameters_changed(&self.params, &changed);
         }
     }
 }

@@ -2,8 +2,12 @@
 //! Texel data lives in the parameter store (`<key>.data`, shape
 //! `[h, w, c]`), uniform values in `<key>.value`.
 
+pub mod bitmap;
+mod checkerboard;
 mod uniform;
 
+pub use bitmap::{Bitmap, FilterType, WrapMode};
+pub use checkerboard::{Checkerboard, MITSUBA_EVAL1_SWAPS_COLORS};
 pub use uniform::Uniform;
 
 use crate::ad::Real;
@@ -30,6 +34,8 @@ pub trait TextureT {
 #[derive(Clone, Debug)]
 pub enum Texture {
     Uniform(Uniform),
+    Bitmap(Bitmap),
+    Checkerboard(Checkerboard),
 }
 
 impl TextureT for Texture {
@@ -37,22 +43,30 @@ impl TextureT for Texture {
     fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         match self {
             Texture::Uniform(t) => t.eval(store, si),
+            Texture::Bitmap(t) => t.eval(store, si),
+            Texture::Checkerboard(t) => t.eval(store, si),
         }
     }
     #[inline]
     fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
         match self {
             Texture::Uniform(t) => t.eval_1(store, si),
+            Texture::Bitmap(t) => t.eval_1(store, si),
+            Texture::Checkerboard(t) => t.eval_1(store, si),
         }
     }
     fn mean(&self, store: &ParamStore) -> f32 {
         match self {
             Texture::Uniform(t) => t.mean(store),
+            Texture::Bitmap(t) => t.mean(store),
+            Texture::Checkerboard(t) => t.mean(store),
         }
     }
     fn max(&self, store: &ParamStore) -> f32 {
         match self {
             Texture::Uniform(t) => t.max(store),
+            Texture::Bitmap(t) => t.max(store),
+            Texture::Checkerboard(t) => t.max(store),
         }
     }
 }
@@ -106,10 +120,58 @@ impl Texture {
     }
 
     /// Builds a `<texture>` node.
-    pub fn from_node(node: &Node, _ctx: &mut LoadContext) -> Result<Texture> {
-        Err(node.error(format!(
-            "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard)",
-            node.plugin
-        )))
+    /// Builds a `<texture>` node (and checks that all its parameters were
+    /// used).
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Texture> {
+        let t = match node.plugin.as_str() {
+            "bitmap" => Texture::Bitmap(Bitmap::from_node(node, ctx)?),
+            "checkerboard" => Texture::Checkerboard(Checkerboard::from_node(node, ctx)?),
+            _ => {
+                return Err(node.error(format!(
+                    "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard)",
+                    node.plugin
+                )))
+            }
+        };
+        node.check_all_used()?;
+        Ok(t)
     }
+}
+
+/// A surface interaction at `uv` (on the z = 0 plane, normal +z, viewed
+/// from above), for texture tests.
+#[cfg(test)]
+pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
+    use crate::math::{Frame, V2, V3};
+    let n = V3::cst(glam::Vec3::Z);
+    SurfaceInteraction {
+        t: R::cst(1.0),
+        p: V3::cst(glam::Vec3::new(u, v, 0.0)),
+        n,
+        sh_frame: Frame::from_normal(n),
+        uv: V2::cst(glam::Vec2::new(u, v)),
+        wi: V3::cst(glam::Vec3::Z),
+        shape: 0,
+        prim: 0,
+    }
+}
+
+/// A node with the given properties, declared at `test.xml:1`.
+#[cfg(test)]
+pub(crate) fn test_node(
+    class: crate::scene::Class,
+    plugin: &str,
+    key: &str,
+    props: Vec<(&str, Value)>,
+) -> Node {
+    use crate::error::SrcLoc;
+    let loc = SrcLoc {
+        file: "/tmp/test.xml".into(),
+        line: 1,
+    };
+    let mut n = Node::new(class, plugin, Some(key.into()), key.into(), loc.clone());
+    for (name, v) in props {
+        n.props.push(crate::scene::Prop::new(name, v, loc.clone()));
+    }
+    n
 }

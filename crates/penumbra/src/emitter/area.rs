@@ -1,0 +1,279 @@
+//! Mitsuba's `area` emitter: a shape that emits radiance from the side its
+//! normal points to.
+
+use super::{surface_si, DirectionSample, EmitterT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::{PositionSample, Shape, ShapeT, SurfaceInteraction};
+use crate::math::{Spectrum, V3};
+use crate::params::{Domain, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture, TextureT};
+use glam::{Vec2, Vec3};
+
+/// Radiance `radiance` (a value or a texture over the shape's uv, key
+/// `<shape key>.emitter.radiance.value` for a value) leaving shape `shape`
+/// on the side of its normal; nothing leaves the back side. Sampled by
+/// the shape's uniform-area position sampling, converted to solid angle.
+#[derive(Clone, Debug)]
+pub struct Area {
+    pub radiance: Texture,
+    /// Index of the shape in the scene's shape list.
+    pub shape: u32,
+}
+
+impl Area {
+    pub fn from_node(node: &Node, shape: u32, ctx: &mut LoadContext) -> Result<Area> {
+        let radiance = Texture::from_prop(
+            node,
+            "radiance",
+            Some(1.0),
+            Channels::Rgb,
+            Domain::NonNegative,
+            ctx,
+        )?;
+        Ok(Area { radiance, shape })
+    }
+
+    /// The direction sample towards position sample `ps` (area density)
+    /// seen from `ref_p`: solid-angle density `pdf_A · dist² / |cos θ_e|`
+    /// and weight `L / pdf`. `None` when `ref_p` is behind the emitting
+    /// side or coincides with the sample.
+    pub fn sample_from_position<R: Real>(
+        &self,
+        store: &ParamStore,
+        ps: &PositionSample,
+        ref_p: Vec3,
+    ) -> Option<(DirectionSample, Spectrum<R>)> {
+        let to = ps.p - ref_p;
+        let dist2 = to.length_squared();
+        if !(dist2 > 0.0) || !(ps.pdf > 0.0) {
+            return None;
+        }
+        let dist = dist2.sqrt();
+        let d = to / dist;
+        // cosine at the emitter between its normal and the direction to ref_p
+        let cos_e = -d.dot(ps.n);
+        if !(cos_e > 0.0) {
+            return None;
+        }
+        let pdf = ps.pdf * dist2 / cos_e;
+        let si = surface_si::<R>(ps.p, ps.n, ps.uv, -d, self.shape, ps.prim);
+        let l = self.radiance.eval(store, &si);
+        let ds = DirectionSample {
+            p: ps.p,
+            n: ps.n,
+            d,
+            dist,
+            pdf,
+            delta: false,
+        };
+        Some((ds, l.scale(1.0 / pdf)))
+    }
+
+    /// Solid-angle density of reaching emitter point `p` (normal `n`) along
+    /// `d` from `ref_p`, when positions are sampled with area density
+    /// `pdf_area`.
+    pub fn pdf_from_area(pdf_area: f32, ref_p: Vec3, d: Vec3, p: Vec3, n: Vec3) -> f32 {
+        let cos_e = -d.dot(n);
+        if !(cos_e > 0.0) {
+            return 0.0;
+        }
+        pdf_area * (p - ref_p).length_squared() / cos_e
+    }
+}
+
+impl EmitterT for Area {
+    fn sample_direction<R: Real>(
+        &self,
+        store: &ParamStore,
+        shapes: &[Shape],
+        ref_p: Vec3,
+        u: Vec2,
+    ) -> Option<(DirectionSample, Spectrum<R>)> {
+        let shape = shapes.get(self.shape as usize)?;
+        let ps = shape.sample_position(store, u);
+        self.sample_from_position(store, &ps, ref_p)
+    }
+
+    /// Assumes the shape's `sample_position` is uniform by area (density
+    /// `1 / surface_area`), as `ShapeT` specifies.
+    fn pdf_direction(
+        &self,
+        _store: &ParamStore,
+        shapes: &[Shape],
+        ref_p: Vec3,
+        d: Vec3,
+        p: Vec3,
+        n: Vec3,
+    ) -> f32 {
+        let Some(shape) = shapes.get(self.shape as usize) else {
+            return 0.0;
+        };
+        let area = shape.surface_area();
+        if !(area > 0.0) {
+            return 0.0;
+        }
+        Area::pdf_from_area(1.0 / area, ref_p, d, p, n)
+    }
+
+    /// Radiance towards `si.wi` if it is on the front side (shading frame
+    /// cos θ > 0, as Mitsuba), else zero.
+    fn eval_surface<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        if !(si.wi.z.val() > 0.0) {
+            return V3::zero();
+        }
+        self.radiance.eval(store, si)
+    }
+
+    fn eval_environment<R: Real>(&self, _store: &ParamStore, _d: Vec3) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn is_delta(&self) -> bool {
+        false
+    }
+    fn is_environment(&self) -> bool {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ad::Dual;
+    use crate::emitter::test_util::{node, CHI2_ALPHA};
+    use crate::emitter::{surface_si, Emitter};
+    use crate::scene::Value;
+    use crate::testing::Chi2Test;
+
+    /// A 2 × 3 rectangle centred at (0, 0, 1) facing −z, sampled uniformly
+    /// by area (stands in for a shape's `sample_position`).
+    const C: Vec3 = Vec3::new(0.0, 0.0, 1.0);
+    const EX: Vec3 = Vec3::new(1.0, 0.0, 0.0);
+    const EY: Vec3 = Vec3::new(0.0, 1.5, 0.0);
+    const N: Vec3 = Vec3::new(0.0, 0.0, -1.0);
+    const AREA: f32 = 6.0;
+
+    fn sample_rect(u: Vec2) -> PositionSample {
+        PositionSample {
+            p: C + EX * (2.0 * u.x - 1.0) + EY * (2.0 * u.y - 1.0),
+            n: N,
+            uv: u,
+            pdf: 1.0 / AREA,
+            prim: 0,
+        }
+    }
+
+    /// Where the ray from `o` along `d` meets the rectangle, if it does.
+    fn hit_rect(o: Vec3, d: Vec3) -> Option<Vec3> {
+        let t = (C - o).dot(N) / d.dot(N);
+        if !(t > 0.0) {
+            return None;
+        }
+        let p = o + d * t;
+        let q = p - C;
+        (q.dot(EX).abs() <= EX.length_squared() && q.dot(EY).abs() <= EY.length_squared())
+            .then_some(p)
+    }
+
+    fn make() -> (Area, LoadContext) {
+        let mut ctx = LoadContext::default();
+        let n = node(
+            "area",
+            "light.emitter",
+            vec![("radiance", Value::Rgb(Vec3::new(4.0, 2.0, 1.0)))],
+        );
+        let Emitter::Area(a) = Emitter::from_node(&n, Some(3), &mut ctx).unwrap() else {
+            panic!("not an area emitter")
+        };
+        assert_eq!(a.shape, 3);
+        (a, ctx)
+    }
+
+    #[test]
+    fn solid_angle_sampling_matches_pdf() {
+        let (a, ctx) = make();
+        let s = &ctx.store;
+        let ref_p = Vec3::new(0.2, -0.1, 0.0);
+        let test = Chi2Test {
+            integration_res: 24,
+            ..Chi2Test::default()
+        };
+        let r = test.run(
+            |rng| {
+                let ps = sample_rect(rng.next_2d());
+                let (ds, w) = a.sample_from_position::<f32>(s, &ps, ref_p)?;
+                let pdf = Area::pdf_from_area(1.0 / AREA, ref_p, ds.d, ds.p, ds.n);
+                assert!((pdf - ds.pdf).abs() <= 1e-4 * pdf);
+                assert!(!ds.delta && (ds.dist - (ds.p - ref_p).length()).abs() < 1e-5);
+                // weight = L / pdf, with L evaluated as a ray hitting ds.p sees it
+                let si = surface_si::<f32>(ds.p, ds.n, ps.uv, -ds.d, 3, 0);
+                let l = a.eval_surface(s, &si).val();
+                assert!((w.val() * pdf - l).abs().max_element() < 1e-4 * l.max_element());
+                Some(ds.d)
+            },
+            |d| match hit_rect(ref_p, d) {
+                Some(p) => Area::pdf_from_area(1.0 / AREA, ref_p, d, p, N),
+                None => 0.0,
+            },
+        );
+        assert!(r.p_value > CHI2_ALPHA, "{r:?}");
+        assert!((r.pdf_integral - 1.0).abs() < 1e-2, "{r:?}");
+    }
+
+    #[test]
+    fn one_sided_emission() {
+        let (a, ctx) = make();
+        let s = &ctx.store;
+        // behind the emitting side: nothing to sample
+        let behind = Vec3::new(0.0, 0.0, 2.0);
+        assert!(a
+            .sample_from_position::<f32>(s, &sample_rect(Vec2::splat(0.3)), behind)
+            .is_none());
+        assert_eq!(Area::pdf_from_area(1.0 / AREA, behind, -Vec3::Z, C, N), 0.0);
+        let front = surface_si::<f32>(C, N, Vec2::ZERO, -Vec3::Z, 3, 0);
+        let back = surface_si::<f32>(C, N, Vec2::ZERO, Vec3::Z, 3, 0);
+        assert_eq!(a.eval_surface(s, &front).val(), Vec3::new(4.0, 2.0, 1.0));
+        assert_eq!(a.eval_surface(s, &back).val(), Vec3::ZERO);
+    }
+
+    #[test]
+    fn radiance_key_and_derivative() {
+        let (a, mut ctx) = make();
+        ctx.store
+            .set_tangent("light.emitter.radiance.value", &[0.0, 0.0, 1.0])
+            .unwrap();
+        let ps = sample_rect(Vec2::new(0.5, 0.5));
+        let (ds, w) = a
+            .sample_from_position::<Dual>(&ctx.store, &ps, Vec3::ZERO)
+            .unwrap();
+        assert!((w.z.d - 1.0 / ds.pdf).abs() < 1e-5 && w.x.d == 0.0);
+        // straight below the centre: pdf = dist² / (A cos θ) = 1/6
+        assert!((ds.pdf - 1.0 / 6.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn attachment_rules() {
+        let mut ctx = LoadContext::default();
+        let e = Emitter::from_node(&node("area", "x", vec![]), None, &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nested inside a shape"), "{e}");
+        let e = Emitter::from_node(&node("point", "y", vec![]), Some(0), &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot be attached"), "{e}");
+        let e = Emitter::from_node(
+            &node("area", "z", vec![("radience", Value::Float(1.0))]),
+            Some(0),
+            &mut ctx,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("unknown parameter 'radience'"), "{e}");
+        let e = Emitter::from_node(&node("sun", "w", vec![]), None, &mut ctx)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown emitter plugin 'sun'"), "{e}");
+    }
+}

@@ -1,0 +1,135 @@
+//! Mitsuba's `directional` emitter: parallel light from infinitely far
+//! away.
+
+use super::{eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::{Shape, SurfaceInteraction};
+use crate::math::{Spectrum, V3};
+use crate::params::{Domain, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture};
+use glam::{Vec2, Vec3};
+
+/// Irradiance `irradiance` (W/m² on a surface facing the light, key
+/// `<key>.irradiance.value`) travelling along `direction` (or local +z of
+/// `to_world`).
+#[derive(Clone, Debug)]
+pub struct Directional {
+    pub irradiance: Texture,
+    /// Unit direction the light travels in (world space).
+    pub direction: Vec3,
+    /// The scene's bounding sphere (see `Emitter::set_scene_bounds`).
+    pub bounds: BoundingSphere,
+}
+
+impl Directional {
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Directional> {
+        let irradiance = Texture::from_prop(
+            node,
+            "irradiance",
+            Some(1.0),
+            Channels::Rgb,
+            Domain::NonNegative,
+            ctx,
+        )?;
+        let dir = match (node.vec3_opt("direction")?, node.has("to_world")) {
+            (Some(_), true) => {
+                return Err(node
+                    .error("only one of the parameters 'direction' and 'to_world' can be given"))
+            }
+            (Some(d), false) => d,
+            (None, _) => node.transform("to_world")?.vector(Vec3::Z),
+        };
+        let direction = dir.normalize();
+        if !direction.is_finite() {
+            return Err(node.error("the light direction must be a non-zero vector"));
+        }
+        Ok(Directional {
+            irradiance,
+            direction,
+            bounds: BoundingSphere::default(),
+        })
+    }
+}
+
+impl EmitterT for Directional {
+    /// The direction towards the light (`−direction`), weight `E` (pdf 1,
+    /// delta, infinite distance; `p` is outside the scene bounds).
+    fn sample_direction<R: Real>(
+        &self,
+        store: &ParamStore,
+        _shapes: &[Shape],
+        ref_p: Vec3,
+        _u: Vec2,
+    ) -> Option<(DirectionSample, Spectrum<R>)> {
+        let d = -self.direction;
+        let ds = DirectionSample {
+            p: far_point(&self.bounds, ref_p, d),
+            n: self.direction,
+            d,
+            dist: f32::INFINITY,
+            pdf: 1.0,
+            delta: true,
+        };
+        Some((ds, eval_uniform::<R>(&self.irradiance, store)))
+    }
+    fn pdf_direction(
+        &self,
+        _: &ParamStore,
+        _: &[Shape],
+        _: Vec3,
+        _: Vec3,
+        _: Vec3,
+        _: Vec3,
+    ) -> f32 {
+        0.0
+    }
+    fn eval_surface<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn eval_environment<R: Real>(&self, _: &ParamStore, _: Vec3) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn is_delta(&self) -> bool {
+        true
+    }
+    fn is_environment(&self) -> bool {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::emitter::test_util::node;
+    use crate::emitter::Emitter;
+    use crate::scene::Value;
+
+    #[test]
+    fn light_comes_from_minus_direction() {
+        let mut ctx = LoadContext::default();
+        let n = node(
+            "directional",
+            "sun",
+            vec![
+                ("irradiance", Value::Float(2.0)),
+                ("direction", Value::Vector(Vec3::new(0.0, 0.0, -3.0))),
+            ],
+        );
+        let mut e = Emitter::from_node(&n, None, &mut ctx).unwrap();
+        e.set_scene_bounds(Vec3::ZERO, 3.0 * 3f32.sqrt());
+        let (ds, w) = e
+            .sample_direction::<f32>(&ctx.store, &[], Vec3::ZERO, Vec2::ZERO)
+            .unwrap();
+        assert_eq!(w.val(), Vec3::splat(2.0));
+        assert_eq!(
+            (ds.d, ds.n, ds.pdf, ds.delta),
+            (Vec3::Z, -Vec3::Z, 1.0, true)
+        );
+        assert!(ds.dist.is_infinite());
+        // outside the scene's bounding sphere (Mitsuba: p = (0, 0, 10.39))
+        assert!((ds.p - Vec3::new(0.0, 0.0, 10.392)).length() < 1e-2);
+        assert!(ctx.store.id("sun.irradiance.value").is_some());
+    }
+}
