@@ -5,6 +5,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use penumbra::diff::{check_gradient, CheckOptions, Estimate};
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, RenderOptions};
+use penumbra::optim::Job;
 use penumbra::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -72,6 +73,13 @@ enum Command {
         define: Vec<String>,
         #[arg(long)]
         threads: Option<usize>,
+    },
+    /// Run an inverse-rendering job described in a TOML file: writes progress
+    /// images, the final parameters, loss.csv and a loss plot (loss.png).
+    Optimize {
+        job: PathBuf,
+        #[arg(short, long)]
+        quiet: bool,
     },
     /// Time renders of a scene in one process: the first render and the
     /// following (warm) ones, with peak memory; prints one JSON line.
@@ -269,6 +277,43 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             if worst >= 4.0 {
                 return Err("gradients disagree beyond their noise".into());
+            }
+            Ok(())
+        }
+        Command::Optimize { job, quiet } => {
+            let mut job = Job::load(&job).map_err(|e| e.to_string())?;
+            let n = job.spec.iterations as u64;
+            let bar = (!quiet).then(|| {
+                let b = ProgressBar::new(n);
+                b.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} optimizing [{elapsed_precise}] [{wide_bar}] {pos}/{len} (ETA {eta}) {msg}",
+                    )
+                    .expect("the progress template is valid")
+                    .progress_chars("=> "),
+                );
+                b
+            });
+            let result = job
+                .run(|it, loss| {
+                    if let Some(b) = &bar {
+                        b.set_position(it as u64 + 1);
+                        b.set_message(format!("loss {loss:.3e}"));
+                    }
+                })
+                .map_err(|e| e.to_string())?;
+            if let Some(b) = bar {
+                b.finish_and_clear();
+            }
+            let first = result.losses.first().copied().unwrap_or(f64::NAN);
+            let last = result.losses.last().copied().unwrap_or(f64::NAN);
+            println!(
+                "loss {first:.4e} -> {last:.4e} over {} iterations; results in {}",
+                result.losses.len(),
+                result.output.display()
+            );
+            for (key, err) in &result.param_errors {
+                println!("{key}: max |error| vs the scene's value {err:.4}");
             }
             Ok(())
         }
