@@ -4,9 +4,9 @@ use super::{nested_bsdfs, Bsdf, BsdfFlags, BsdfSample, BsdfT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
+use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore};
 use crate::scene::{LoadContext, Node};
-use crate::math::Spectrum;
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -23,7 +23,14 @@ pub struct BlendBsdf {
 
 impl BlendBsdf {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<BlendBsdf> {
-        let weight = Texture::from_prop(node, "weight", None, Channels::Mono, Domain::UnitInterval, ctx)?;
+        let weight = Texture::from_prop(
+            node,
+            "weight",
+            None,
+            Channels::Mono,
+            Domain::UnitInterval,
+            ctx,
+        )?;
         let nested = nested_bsdfs(node, &["bsdf_0", "bsdf_1"])?;
         if nested.len() != 2 {
             return Err(node.error(format!("expects two nested BSDFs, found {}", nested.len())));
@@ -84,7 +91,12 @@ impl BsdfT for BlendBsdf {
         let w_r = self.w(store, si);
         let w = w_r.val();
         let (idx, prob, prob_r, u1) = if u1 >= w {
-            (0, 1.0 - w, -w_r + 1.0, ((u1 - w) / (1.0 - w)).min(1.0 - f32::EPSILON))
+            (
+                0,
+                1.0 - w,
+                -w_r + 1.0,
+                ((u1 - w) / (1.0 - w)).min(1.0 - f32::EPSILON),
+            )
         } else {
             (1, w, w_r, (u1 / w).min(1.0 - f32::EPSILON))
         };
@@ -94,7 +106,7 @@ impl BsdfT for BlendBsdf {
         let mut bs = self.bsdfs[idx].sample(store, si, u1, u2)?;
         if bs.lobe.has(BsdfFlags::DELTA) {
             bs.pdf *= prob;
-            bs.weight = bs.weight * (prob_r / prob);
+            bs.weight *= prob_r / prob;
         } else {
             bs.pdf = self.pdf(store, si, bs.wo);
             if !(bs.pdf > 0.0) {
@@ -126,20 +138,28 @@ mod tests {
             &[
                 ("weight", float(0.3)),
                 ("a", nested("bl", "a", "diffuse", &[])),
-                ("b", nested("bl", "b", "roughconductor", &[("alpha", float(0.3))])),
+                (
+                    "b",
+                    nested("bl", "b", "roughconductor", &[("alpha", float(0.3))]),
+                ),
             ],
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
         let mut store = ctx.store;
-        for k in ["bl.weight.value", "bl.bsdf_0.reflectance.value", "bl.bsdf_1.alpha.value"] {
+        for k in [
+            "bl.weight.value",
+            "bl.bsdf_0.reflectance.value",
+            "bl.bsdf_1.alpha.value",
+        ] {
             assert!(store.id(k).is_some(), "{k}");
         }
         let Bsdf::BlendBsdf(bb) = &b else { panic!() };
         let wi = dir(0.7, 0.0);
         let wo = dir(0.6, 3.0);
         let s = si::<f32>(wi);
-        let want = bb.bsdfs[0].eval(&store, &s, wo).val() * 0.7 + bb.bsdfs[1].eval(&store, &s, wo).val() * 0.3;
+        let want = bb.bsdfs[0].eval(&store, &s, wo).val() * 0.7
+            + bb.bsdfs[1].eval(&store, &s, wo).val() * 0.3;
         assert!((eval_f32(&b, &store, wi, wo) - want).abs().max_element() < 1e-6);
         check_smooth(&b, &store, &[wi, dir(0.2, 1.0)], 1);
         store.set_tangent("bl.weight.value", &[1.0]).unwrap();
@@ -159,7 +179,9 @@ mod tests {
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
-        let bs = b.sample(&ctx.store, &si::<f32>(wi), 0.1, glam::Vec2::splat(0.5)).unwrap();
+        let bs = b
+            .sample(&ctx.store, &si::<f32>(wi), 0.1, glam::Vec2::splat(0.5))
+            .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         assert!((bs.pdf - 0.5).abs() < 1e-6 && (bs.weight.x - 1.0).abs() < 1e-6);
         let (a, se) = albedo_estimate(&b, &ctx.store, wi, 20_000, 1);

@@ -44,7 +44,14 @@ impl ConductorIor {
         };
         let tex = |name: &str, v: Vec3, ctx: &mut LoadContext| -> Result<Texture> {
             if node.has(name) || v.x == v.y && v.y == v.z {
-                Texture::from_prop(node, name, Some(v.x), Channels::Rgb, Domain::NonNegative, ctx)
+                Texture::from_prop(
+                    node,
+                    name,
+                    Some(v.x),
+                    Channels::Rgb,
+                    Domain::NonNegative,
+                    ctx,
+                )
             } else {
                 // a named material: an RGB uniform value
                 crate::texture::Uniform::new(
@@ -147,20 +154,40 @@ mod tests {
             assert!(store.id(k).is_some(), "{k}");
         }
         let wi = dir(0.3, 1.0);
-        let bs = b.sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5)).unwrap();
+        let bs = b
+            .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5))
+            .unwrap();
         assert!((bs.wo - glam::Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
         assert!((bs.weight.val() - glam::Vec3::ONE).abs().max_element() < 1e-6);
         assert!(eval_f32(&b, &store, wi, bs.wo) == glam::Vec3::ZERO);
-        assert!(b.sample(&store, &si::<f32>(-wi), 0.5, glam::Vec2::splat(0.5)).is_none());
+        assert!(b
+            .sample(&store, &si::<f32>(-wi), 0.5, glam::Vec2::splat(0.5))
+            .is_none());
 
-        let (b, store) = build("conductor", &[("material", string("Au")), ("specular_reflectance", float(0.5))]);
-        let bs = b.sample(&store, &si::<f32>(wi), 0.1, glam::Vec2::ZERO).unwrap();
+        let (b, store) = build(
+            "conductor",
+            &[
+                ("material", string("Au")),
+                ("specular_reflectance", float(0.5)),
+            ],
+        );
+        let bs = b
+            .sample(&store, &si::<f32>(wi), 0.1, glam::Vec2::ZERO)
+            .unwrap();
         let want = 0.5 * fresnel_conductor_1(wi.z, 0.143036, 3.983);
         assert!((bs.weight.x - want).abs() < 1e-5, "{bs:?} {want}");
-        assert!(bs.weight.x > bs.weight.z, "gold reflects red more than blue");
+        assert!(
+            bs.weight.x > bs.weight.z,
+            "gold reflects red more than blue"
+        );
 
         let n = node_with_key("conductor", "b", &[("material", string("Gold"))]);
-        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default()).unwrap_err().to_string();
-        assert!(e.contains("unknown conductor material 'Gold'") && e.contains("Au"), "{e}");
+        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("unknown conductor material 'Gold'") && e.contains("Au"),
+            "{e}"
+        );
     }
 }

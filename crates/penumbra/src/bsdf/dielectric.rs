@@ -32,8 +32,20 @@ impl Dielectric {
         let eta = eta_props(node, 1.5046, 1.000277)?;
         Ok(Dielectric {
             eta: scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?,
-            specular_reflectance: opt_texture(node, "specular_reflectance", Channels::Rgb, Domain::UnitInterval, ctx)?,
-            specular_transmittance: opt_texture(node, "specular_transmittance", Channels::Rgb, Domain::UnitInterval, ctx)?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_transmittance: opt_texture(
+                node,
+                "specular_transmittance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
         })
     }
 }
@@ -135,10 +147,19 @@ mod tests {
 
     #[test]
     fn snell_fresnel_and_energy() {
-        let (b, store) = build("dielectric", &[("int_ior", string("water")), ("ext_ior", string("air"))]);
+        let (b, store) = build(
+            "dielectric",
+            &[("int_ior", string("water")), ("ext_ior", string("air"))],
+        );
         let eta = 1.3330f32 / 1.000277;
         assert!((store.data(store.id("b.eta").unwrap())[0] - eta).abs() < 1e-6);
-        for wi in [dir(0.8, 0.4), dir(0.2, 2.0), dir(-0.8, 0.4), dir(-0.5, 1.0), dir(-0.9, 5.0)] {
+        for wi in [
+            dir(0.8, 0.4),
+            dir(0.2, 2.0),
+            dir(-0.8, 0.4),
+            dir(-0.5, 1.0),
+            dir(-0.9, 5.0),
+        ] {
             let s = si::<f32>(wi);
             let (f, ..) = fresnel_dielectric(wi.z, eta);
             let mut rng = Pcg32::new(3);
@@ -165,13 +186,22 @@ mod tests {
             }
             // reflection frequency ~ Binomial(n, F)
             let sd = (n as f32 * f * (1.0 - f)).sqrt();
-            assert!((nr as f32 - n as f32 * f).abs() <= 4.0 * sd + 1.0, "{wi:?}: {nr} vs {}", n as f32 * f);
+            assert!(
+                (nr as f32 - n as f32 * f).abs() <= 4.0 * sd + 1.0,
+                "{wi:?}: {nr} vs {}",
+                n as f32 * f
+            );
             let (a, _) = albedo_estimate(&b, &store, wi, 2000, 9);
             assert!((a.x - 1.0).abs() < 1e-4, "{a}");
-            assert!(eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO && pdf_f32(&b, &store, wi, -wi) == 0.0);
+            assert!(
+                eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO
+                    && pdf_f32(&b, &store, wi, -wi) == 0.0
+            );
         }
         // total internal reflection from inside at grazing angles
-        let bs = b.sample(&store, &si::<f32>(dir(-0.2, 0.0)), 0.999, Vec2::ZERO).unwrap();
+        let bs = b
+            .sample(&store, &si::<f32>(dir(-0.2, 0.0)), 0.999, Vec2::ZERO)
+            .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
     }
 
@@ -179,14 +209,27 @@ mod tests {
     fn tints_and_errors() {
         let (b, store) = build(
             "dielectric",
-            &[("int_ior", float(1.5)), ("specular_transmittance", rgb(0.5, 0.5, 0.5))],
+            &[
+                ("int_ior", float(1.5)),
+                ("specular_transmittance", rgb(0.5, 0.5, 0.5)),
+            ],
         );
         assert!(store.id("b.specular_transmittance.value").is_some());
         assert!(store.id("b.specular_reflectance.value").is_none());
-        let bs = b.sample(&store, &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO).unwrap();
-        assert!((bs.weight.x - 0.5 / (1.5f32 / 1.000277).powi(2)).abs() < 1e-5, "{bs:?}");
+        let bs = b
+            .sample(&store, &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO)
+            .unwrap();
+        assert!(
+            (bs.weight.x - 0.5 / (1.5f32 / 1.000277).powi(2)).abs() < 1e-5,
+            "{bs:?}"
+        );
         let n = node_with_key("dielectric", "b", &[("int_ior", string("glass"))]);
-        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default()).unwrap_err().to_string();
-        assert!(e.contains("unknown material 'glass'") && e.contains("bk7"), "{e}");
+        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("unknown material 'glass'") && e.contains("bk7"),
+            "{e}"
+        );
     }
 }

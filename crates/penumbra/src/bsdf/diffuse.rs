@@ -103,6 +103,9 @@ mod tests {
         assert!(eval_f32(&b, &store, wi, -Vec3::Z) == glam::Vec3::ZERO);
         check_smooth(&b, &store, &[wi, Vec3::Z, dir(0.05, 2.0)], 1);
         let (a, _) = albedo_estimate(&b, &store, wi, 20_000, 3);
-        assert!((a.x - 0.2).abs() < 1e-5 && (a.z - 0.8).abs() < 1e-5, "{a:?}");
+        assert!(
+            (a.x - 0.2).abs() < 1e-5 && (a.z - 0.8).abs() < 1e-5,
+            "{a:?}"
+        );
     }
 }

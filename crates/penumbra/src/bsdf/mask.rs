@@ -22,7 +22,14 @@ pub struct Mask {
 
 impl Mask {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Mask> {
-        let opacity = Texture::from_prop(node, "opacity", Some(0.5), Channels::Mono, Domain::UnitInterval, ctx)?;
+        let opacity = Texture::from_prop(
+            node,
+            "opacity",
+            Some(0.5),
+            Channels::Mono,
+            Domain::UnitInterval,
+            ctx,
+        )?;
         let nested = nested_bsdfs(node, &["nested_bsdf"])?;
         let nested = Box::new(Bsdf::from_node(&nested[0], ctx)?);
         Ok(Mask { opacity, nested })
@@ -81,7 +88,7 @@ impl BsdfT for Mask {
             .nested
             .sample(store, si, (u1 / o).min(1.0 - f32::EPSILON), u2)?;
         bs.pdf *= o;
-        bs.weight = bs.weight * (o_r / o);
+        bs.weight *= o_r / o;
         Some(bs)
     }
 
@@ -101,19 +108,34 @@ mod tests {
         let n = node_with_key(
             "mask",
             "leaf",
-            &[("opacity", float(0.25)), ("bsdf", nested("leaf", "bsdf", "diffuse", &[]))],
+            &[
+                ("opacity", float(0.25)),
+                ("bsdf", nested("leaf", "bsdf", "diffuse", &[])),
+            ],
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
         let store = ctx.store;
-        assert!(store.id("leaf.opacity.value").is_some() && store.id("leaf.nested_bsdf.reflectance.value").is_some());
+        assert!(
+            store.id("leaf.opacity.value").is_some()
+                && store.id("leaf.nested_bsdf.reflectance.value").is_some()
+        );
         let wi = dir(0.6, 1.0);
-        let bs = b.sample(&store, &si::<f32>(wi), 0.9, glam::Vec2::splat(0.5)).unwrap();
+        let bs = b
+            .sample(&store, &si::<f32>(wi), 0.9, glam::Vec2::splat(0.5))
+            .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::NULL);
-        assert!((bs.wo + wi).length() < 1e-6 && (bs.pdf - 0.75).abs() < 1e-6 && (bs.weight.x - 1.0).abs() < 1e-6);
+        assert!(
+            (bs.wo + wi).length() < 1e-6
+                && (bs.pdf - 0.75).abs() < 1e-6
+                && (bs.weight.x - 1.0).abs() < 1e-6
+        );
         check_smooth(&b, &store, &[wi], 1);
         // pass-through + 0.25 × diffuse albedo 0.5
         let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 8);
-        assert!((a.x - (0.75 + 0.125)).abs() < 4.0 * se.x + 1e-4, "{a} ± {se}");
+        assert!(
+            (a.x - (0.75 + 0.125)).abs() < 4.0 * se.x + 1e-4,
+            "{a} ± {se}"
+        );
     }
 }

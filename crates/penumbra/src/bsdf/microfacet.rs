@@ -274,12 +274,7 @@ pub(crate) fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u1: f64) -> f64 {
     let u1 = u1.clamp(1e-9, 1.0 - 1e-9);
     let target = u1 * cdf(hi);
     solve_increasing(
-        |x| {
-            (
-                cdf(x) - target,
-                2.0 / sqrt_pi * (cot - x) * (-x * x).exp(),
-            )
-        },
+        |x| (cdf(x) - target, 2.0 / sqrt_pi * (cot - x) * (-x * x).exp()),
         -SLOPE_LIMIT,
         hi,
         0.0,
@@ -290,12 +285,7 @@ pub(crate) fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u1: f64) -> f64 {
 pub(crate) fn erfinv(z: f64) -> f64 {
     let sqrt_pi = PI64.sqrt();
     solve_increasing(
-        |y| {
-            (
-                erfc(-y) - 1.0 - z,
-                2.0 / sqrt_pi * (-y * y).exp(),
-            )
-        },
+        |y| (erfc(-y) - 1.0 - z, 2.0 / sqrt_pi * (-y * y).exp()),
         -SLOPE_LIMIT,
         SLOPE_LIMIT,
         0.0,
@@ -327,11 +317,20 @@ impl Roughness {
             if node.has("alpha") {
                 return Err(node.error("give either 'alpha' or 'alpha_u' and 'alpha_v', not both"));
             }
-            let au = Texture::from_prop(node, "alpha_u", None, Channels::Mono, Domain::Positive, ctx)?;
-            let av = Texture::from_prop(node, "alpha_v", None, Channels::Mono, Domain::Positive, ctx)?;
+            let au =
+                Texture::from_prop(node, "alpha_u", None, Channels::Mono, Domain::Positive, ctx)?;
+            let av =
+                Texture::from_prop(node, "alpha_v", None, Channels::Mono, Domain::Positive, ctx)?;
             (au, Some(av))
         } else {
-            let a = Texture::from_prop(node, "alpha", Some(0.1), Channels::Mono, Domain::Positive, ctx)?;
+            let a = Texture::from_prop(
+                node,
+                "alpha",
+                Some(0.1),
+                Channels::Mono,
+                Domain::Positive,
+                ctx,
+            )?;
             (a, None)
         };
         Ok(Roughness {

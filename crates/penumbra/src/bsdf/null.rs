@@ -59,14 +59,18 @@ mod tests {
     fn passes_through() {
         let (b, store) = build("null", &[]);
         for wi in [dir(0.3, 1.0), dir(-0.8, 2.0)] {
-            let bs = b.sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::ZERO).unwrap();
+            let bs = b
+                .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
+                .unwrap();
             assert_eq!(bs.lobe, BsdfFlags::NULL);
             assert_eq!(bs.wo, -wi);
             assert_eq!(bs.weight.val(), glam::Vec3::ONE);
             assert!(eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO);
         }
         let n = node_with_key("null", "b", &[("reflectance", float(0.5))]);
-        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default()).unwrap_err().to_string();
+        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("unknown parameter 'reflectance'"), "{e}");
     }
 }

@@ -4,7 +4,7 @@
 //! reflections at the coating, `ρ / (1 − F_dr,int)` (or `ρ / (1 − ρ F_dr,int)`
 //! when `nonlinear`), with `F_dr` the diffuse Fresnel reflectance.
 
-use super::fresnel::{fresnel_diffuse_reflectance, fresnel_dielectric};
+use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance};
 use super::{eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
 use crate::ad::Real;
 use crate::error::Result;
@@ -83,8 +83,21 @@ impl Plastic {
         let eta = eta_props(node, 1.49, 1.000277)?;
         Ok(Plastic {
             eta: scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?,
-            diffuse_reflectance: Texture::from_prop(node, "diffuse_reflectance", Some(0.5), Channels::Rgb, Domain::UnitInterval, ctx)?,
-            specular_reflectance: opt_texture(node, "specular_reflectance", Channels::Rgb, Domain::UnitInterval, ctx)?,
+            diffuse_reflectance: Texture::from_prop(
+                node,
+                "diffuse_reflectance",
+                Some(0.5),
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
             nonlinear: node.bool("nonlinear", false)?,
             specular_sampling_weight: 0.5,
         })
@@ -193,7 +206,11 @@ mod tests {
     fn sampling_matches_pdf_and_lobes() {
         let cases: Vec<Vec<(&str, crate::scene::Value)>> = vec![
             vec![],
-            vec![("diffuse_reflectance", rgb(0.1, 0.3, 0.7)), ("nonlinear", boolean(true)), ("int_ior", float(1.7))],
+            vec![
+                ("diffuse_reflectance", rgb(0.1, 0.3, 0.7)),
+                ("nonlinear", boolean(true)),
+                ("int_ior", float(1.7)),
+            ],
         ];
         let wis = [dir(0.9, 0.2), dir(0.1, 1.0)];
         for c in &cases {
@@ -201,17 +218,24 @@ mod tests {
             check_smooth(&b, &store, &wis, cases.len());
             for wi in wis {
                 let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 2);
-                assert!(a.max_element() <= 1.0 + 4.0 * se.max_element(), "{a} ± {se}");
+                assert!(
+                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
+                    "{a} ± {se}"
+                );
             }
         }
         // specular lobe: mirror direction, weight = F / P(specular)
         let (b, store) = build("plastic", &[]);
         let wi = dir(0.5, 0.3);
-        let bs = b.sample(&store, &si::<f32>(wi), 0.0, Vec2::splat(0.5)).unwrap();
+        let bs = b
+            .sample(&store, &si::<f32>(wi), 0.0, Vec2::splat(0.5))
+            .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         let f = fresnel_dielectric(0.5f32, 1.49 / 1.000277).0;
         assert!((bs.weight.x * bs.pdf - f).abs() < 1e-6, "{bs:?}");
-        assert!(b.sample(&store, &si::<f32>(-wi), 0.0, Vec2::splat(0.5)).is_none());
+        assert!(b
+            .sample(&store, &si::<f32>(-wi), 0.0, Vec2::splat(0.5))
+            .is_none());
     }
 
     /// Values of Mitsuba 3.9.1 (scalar_rgb) plastic `eval` and `pdf`.
@@ -220,18 +244,89 @@ mod tests {
         for &(nonlinear, wi, wo, f_ref, p_ref) in PLASTIC_REF {
             let (b, store) = build(
                 "plastic",
-                &[("diffuse_reflectance", rgb(0.1, 0.3, 0.7)), ("nonlinear", boolean(nonlinear))],
+                &[
+                    ("diffuse_reflectance", rgb(0.1, 0.3, 0.7)),
+                    ("nonlinear", boolean(nonlinear)),
+                ],
             );
-            let (wi, wo) = (glam::Vec3::from(wi).normalize(), glam::Vec3::from(wo).normalize());
+            let (wi, wo) = (
+                glam::Vec3::from(wi).normalize(),
+                glam::Vec3::from(wo).normalize(),
+            );
             let f = eval_f32(&b, &store, wi, wo);
             let p = pdf_f32(&b, &store, wi, wo);
             for c in 0..3 {
-                assert!((f[c] - f_ref[c]).abs() <= 1e-4 * f_ref[c].abs() + 1e-7, "{wi:?} {wo:?}: {f} vs {f_ref:?}");
+                assert!(
+                    (f[c] - f_ref[c]).abs() <= 1e-4 * f_ref[c].abs() + 1e-7,
+                    "{wi:?} {wo:?}: {f} vs {f_ref:?}"
+                );
             }
-            assert!((p - p_ref).abs() <= 1e-4 * p_ref + 1e-7, "pdf {p} vs {p_ref}");
+            assert!(
+                (p - p_ref).abs() <= 1e-4 * p_ref + 1e-7,
+                "pdf {p} vs {p_ref}"
+            );
         }
     }
 
     /// (nonlinear, wi, wo, eval rgb, pdf) from Mitsuba 3.9.1.
-    const PLASTIC_REF: &[(bool, [f32; 3], [f32; 3], [f32; 3], f32)] = &[];
+    type RefRow = (bool, [f32; 3], [f32; 3], [f32; 3], f32);
+    #[allow(clippy::excessive_precision)]
+    const PLASTIC_REF: &[RefRow] = &[
+        (
+            false,
+            [0.3, 0.1, 0.9],
+            [-0.2, 0.4, 0.8],
+            [2.8211704e-02, 8.4635109e-02, 1.9748192e-01],
+            2.5022188e-01,
+        ),
+        (
+            false,
+            [0.8, 0.0, 0.2],
+            [0.1, 0.1, 0.95],
+            [2.4245564e-02, 7.2736695e-02, 1.6971895e-01],
+            1.5590753e-01,
+        ),
+        (
+            false,
+            [0.1, 0.2, 0.95],
+            [-0.9, 0.3, 0.1],
+            [1.5688693e-03, 4.7066081e-03, 1.0982085e-02],
+            3.0065136e-02,
+        ),
+        (
+            false,
+            [0.3, 0.1, 0.9],
+            [-0.3, -0.1, 0.9],
+            [3.0528087e-02, 9.1584265e-02, 2.1369660e-01],
+            2.7045608e-01,
+        ),
+        (
+            true,
+            [0.3, 0.1, 0.9],
+            [-0.2, 0.4, 0.8],
+            [1.2278295e-02, 4.2121407e-02, 1.3785216e-01],
+            2.5022188e-01,
+        ),
+        (
+            true,
+            [0.8, 0.0, 0.2],
+            [0.1, 0.1, 0.95],
+            [1.0552152e-02, 3.6199775e-02, 1.1847223e-01],
+            1.5590753e-01,
+        ),
+        (
+            true,
+            [0.1, 0.2, 0.95],
+            [-0.9, 0.3, 0.1],
+            [6.8280316e-04, 2.3423962e-03, 7.6660393e-03],
+            3.0065136e-02,
+        ),
+        (
+            true,
+            [0.3, 0.1, 0.9],
+            [-0.3, -0.1, 0.9],
+            [1.3286431e-02, 4.5579877e-02, 1.4917082e-01],
+            2.7045608e-01,
+        ),
+    ];
 }

@@ -64,8 +64,21 @@ impl RoughPlastic {
             alpha: scalar_param(node, "alpha", alpha, ParamFlags::DIFFERENTIABLE, ctx)?,
             sample_visible: node.bool("sample_visible", true)?,
             eta: scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?,
-            diffuse_reflectance: Texture::from_prop(node, "diffuse_reflectance", Some(0.5), Channels::Rgb, Domain::UnitInterval, ctx)?,
-            specular_reflectance: opt_texture(node, "specular_reflectance", Channels::Rgb, Domain::UnitInterval, ctx)?,
+            diffuse_reflectance: Texture::from_prop(
+                node,
+                "diffuse_reflectance",
+                Some(0.5),
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
             nonlinear: node.bool("nonlinear", false)?,
             specular_sampling_weight: 0.5,
             external_transmittance: Vec::new(),
@@ -162,7 +175,10 @@ fn interface_albedo(
                 .iter()
                 .map(|&n| beckmann_visible_slope_x(ws.z as f64, sin_t, 0.5 * n + 0.5))
                 .collect(),
-            nodes.iter().map(|&n| erfinv(n.clamp(-1.0 + 1e-9, 1.0 - 1e-9))).collect(),
+            nodes
+                .iter()
+                .map(|&n| erfinv(n.clamp(-1.0 + 1e-9, 1.0 - 1e-9)))
+                .collect(),
         )
     } else {
         (Vec::new(), Vec::new())
@@ -187,7 +203,11 @@ fn interface_albedo(
             } else {
                 (reflect(wi, m), f)
             };
-            let valid = if transmit { wo.z * wi.z < 0.0 } else { wo.z > 0.0 };
+            let valid = if transmit {
+                wo.z * wi.z < 0.0
+            } else {
+                wo.z > 0.0
+            };
             if valid {
                 let g1 = d.smith_g1(V3::from(wo), V3::from(m));
                 sum += (value * g1) as f64 * weights[j] * weights[k] * 0.25;
@@ -208,7 +228,15 @@ fn rough_interface_tables(kind: MicrofacetType, alpha: f32, eta: f32) -> (Vec<f3
     for i in 0..TABLE_RES {
         let mu = i as f32 / (TABLE_RES - 1) as f32;
         let wi = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-        t.push(interface_albedo(kind, alpha, eta, wi, true, res_of(eta), &gl_t));
+        t.push(interface_albedo(
+            kind,
+            alpha,
+            eta,
+            wi,
+            true,
+            res_of(eta),
+            &gl_t,
+        ));
         let r = interface_albedo(kind, alpha, 1.0 / eta, wi, false, res_of(1.0 / eta), &gl_r);
         r_sum += (r * mu) as f64;
     }
@@ -338,7 +366,11 @@ mod tests {
     #[test]
     fn sampling_matches_pdf() {
         let cases: Vec<Vec<(&str, Value)>> = vec![
-            vec![("distribution", string("ggx")), ("alpha", float(0.1)), ("diffuse_reflectance", rgb(0.1, 0.3, 0.7))],
+            vec![
+                ("distribution", string("ggx")),
+                ("alpha", float(0.1)),
+                ("diffuse_reflectance", rgb(0.1, 0.3, 0.7)),
+            ],
             vec![("alpha", float(0.4)), ("nonlinear", boolean(true))],
         ];
         let wis = [dir(0.85, 0.2), dir(0.15, 1.5)];
@@ -347,7 +379,10 @@ mod tests {
             check_smooth(&b, &store, &wis, cases.len());
             for wi in wis {
                 let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 4);
-                assert!(a.max_element() <= 1.0 + 4.0 * se.max_element(), "{a} ± {se}");
+                assert!(
+                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
+                    "{a} ± {se}"
+                );
             }
         }
     }
@@ -370,15 +405,132 @@ mod tests {
             let (wi, wo) = (Vec3::from(wi).normalize(), Vec3::from(wo).normalize());
             let f = eval_f32(&b, &store, wi, wo);
             let p = pdf_f32(&b, &store, wi, wo);
+            // Beckmann: the tables agree to float precision. GGX: the
+            // tables integrate over Heitz 2018's visible-normal sample map,
+            // Mitsuba over Heitz & d'Eon 2014's; the quadratures differ by
+            // ~1e-4 in t(cos θ), which shows in the diffuse term (3e-4) and,
+            // relative to 1 − t, in the lobe selection of the pdf (0.4%).
+            let (tf, tp) = if dist == "ggx" {
+                (1e-3, 5e-3)
+            } else {
+                (2e-5, 2e-5)
+            };
             for c in 0..3 {
-                assert!((f[c] - f_ref[c]).abs() <= 2e-3 * f_ref[c].abs() + 1e-6, "{dist} {wi:?} {wo:?}: {f} vs {f_ref:?}");
+                assert!(
+                    (f[c] - f_ref[c]).abs() <= tf * f_ref[c].abs() + 1e-7,
+                    "{dist} {wi:?} {wo:?}: {f} vs {f_ref:?}"
+                );
             }
-            assert!((p - p_ref).abs() <= 2e-3 * p_ref + 1e-6, "{dist} pdf {p} vs {p_ref}");
+            assert!(
+                (p - p_ref).abs() <= tp * p_ref + 1e-7,
+                "{dist} pdf {p} vs {p_ref}"
+            );
             let d = b.eval(&store, &si::<Dual>(wi), wo);
             assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z]);
         }
     }
 
     /// (distribution, wi, wo, eval rgb, pdf) from Mitsuba 3.9.1.
-    const ROUGHPLASTIC_REF: &[(&str, [f32; 3], [f32; 3], [f32; 3], f32)] = &[];
+    type RefRow = (&'static str, [f32; 3], [f32; 3], [f32; 3], f32);
+    #[allow(clippy::excessive_precision)]
+    const ROUGHPLASTIC_REF: &[RefRow] = &[
+        (
+            "ggx",
+            [0.3, 0.1, 0.9],
+            [-0.2, 0.4, 0.8],
+            [2.9135963e-02, 7.9840727e-02, 1.8125024e-01],
+            2.5947952e-01,
+        ),
+        (
+            "ggx",
+            [0.8, 0.0, 0.2],
+            [0.1, 0.1, 0.95],
+            [2.3440823e-02, 6.8959832e-02, 1.5999785e-01],
+            1.7620304e-01,
+        ),
+        (
+            "ggx",
+            [0.1, 0.2, 0.95],
+            [-0.9, 0.3, 0.1],
+            [2.1090307e-03, 6.0258792e-03, 1.3859576e-02],
+            3.0394204e-02,
+        ),
+        (
+            "ggx",
+            [0.3, 0.1, 0.9],
+            [-0.3, -0.1, 0.9],
+            [3.5581481e-01, 4.1072148e-01, 5.2053481e-01],
+            1.1275039e+00,
+        ),
+        (
+            "ggx",
+            [0.5, 0.0, 0.5],
+            [-0.52, 0.01, 0.5],
+            [5.5322540e-01, 5.9245449e-01, 6.7091262e-01],
+            1.6067243e+00,
+        ),
+        (
+            "ggx",
+            [0.02, 0.0, 0.9998],
+            [0.6, 0.0, 0.8],
+            [2.5508685e-02, 7.1853220e-02, 1.6454229e-01],
+            2.3519194e-01,
+        ),
+        (
+            "ggx",
+            [0.95, 0.0, 0.05],
+            [0.0, 0.9, 0.1],
+            [1.6607825e-03, 4.1625700e-03, 9.1661438e-03],
+            1.8313501e-02,
+        ),
+        (
+            "beckmann",
+            [0.3, 0.1, 0.9],
+            [-0.2, 0.4, 0.8],
+            [2.7192572e-02, 8.1495568e-02, 1.9010155e-01],
+            2.5023031e-01,
+        ),
+        (
+            "beckmann",
+            [0.8, 0.0, 0.2],
+            [0.1, 0.1, 0.95],
+            [2.3598570e-02, 7.0795707e-02, 1.6518998e-01],
+            1.5910403e-01,
+        ),
+        (
+            "beckmann",
+            [0.1, 0.2, 0.95],
+            [-0.9, 0.3, 0.1],
+            [1.8108125e-03, 5.4324376e-03, 1.2675687e-02],
+            3.0057419e-02,
+        ),
+        (
+            "beckmann",
+            [0.3, 0.1, 0.9],
+            [-0.3, -0.1, 0.9],
+            [3.5794911e-01, 4.1671920e-01, 5.3425938e-01],
+            1.1118248e+00,
+        ),
+        (
+            "beckmann",
+            [0.5, 0.0, 0.5],
+            [-0.52, 0.01, 0.5],
+            [5.6772482e-01, 6.0988694e-01, 6.9421118e-01],
+            1.5699098e+00,
+        ),
+        (
+            "beckmann",
+            [0.02, 0.0, 0.9998],
+            [0.6, 0.0, 0.8],
+            [2.4825178e-02, 7.4470095e-02, 1.7375992e-01],
+            2.2944425e-01,
+        ),
+        (
+            "beckmann",
+            [0.95, 0.0, 0.05],
+            [0.0, 0.9, 0.1],
+            [9.0413453e-04, 2.7124037e-03, 6.3289418e-03],
+            8.0557996e-03,
+        ),
+    ];
 }

@@ -107,7 +107,9 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
         let s = si::<f32>(wi);
         let t = Chi2Test {
             samples: 100_000,
-            integration_res: std::env::var("CHI2_RES").map(|v| v.parse().unwrap()).unwrap_or(12),
+            integration_res: std::env::var("CHI2_RES")
+                .map(|v| v.parse().unwrap())
+                .unwrap_or(12),
             seed: 101 + i as u64,
             ..Chi2Test::default()
         };
@@ -124,11 +126,20 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
                 if checked < 2000 {
                     checked += 1;
                     let p = b.pdf(store, &s, bs.wo);
-                    assert!(close(p, bs.pdf, 2e-3), "wi {wi:?} wo {:?}: pdf {p} vs sample pdf {}", bs.wo, bs.pdf);
+                    assert!(
+                        close(p, bs.pdf, 2e-3),
+                        "wi {wi:?} wo {:?}: pdf {p} vs sample pdf {}",
+                        bs.wo,
+                        bs.pdf
+                    );
                     let f = b.eval(store, &s, bs.wo).val() / p;
                     let w = bs.weight.val();
                     for c in 0..3 {
-                        assert!(close(f[c], w[c], 2e-3), "wi {wi:?} wo {:?}: eval/pdf {f} vs weight {w}", bs.wo);
+                        assert!(
+                            close(f[c], w[c], 2e-3),
+                            "wi {wi:?} wo {:?}: eval/pdf {f} vs weight {w}",
+                            bs.wo
+                        );
                     }
                 }
                 Some(bs.wo)
@@ -136,7 +147,11 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
             |wo| b.pdf(store, &s, wo),
         );
         assert!(r.p_value > threshold, "{b:?} wi {wi:?}: χ² failed: {r:?}");
-        assert!(r.pdf_integral <= 1.0 + 1e-2, "{b:?} wi {wi:?}: ∫pdf = {}", r.pdf_integral);
+        assert!(
+            r.pdf_integral <= 1.0 + 1e-2,
+            "{b:?} wi {wi:?}: ∫pdf = {}",
+            r.pdf_integral
+        );
     }
 }
 
@@ -144,7 +159,13 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
 /// `sample` weights (transmitted weights times η², undoing the radiance
 /// scaling of refraction, so that the result is the energy fraction):
 /// returns (mean, standard error) per channel.
-pub fn albedo_estimate(b: &Bsdf, store: &ParamStore, wi: Vec3, n: usize, seed: u64) -> (Vec3, Vec3) {
+pub fn albedo_estimate(
+    b: &Bsdf,
+    store: &ParamStore,
+    wi: Vec3,
+    n: usize,
+    seed: u64,
+) -> (Vec3, Vec3) {
     let s = si::<f32>(wi);
     let mut rng = Pcg32::new(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
@@ -174,9 +195,18 @@ pub fn albedo_estimate(b: &Bsdf, store: &ParamStore, wi: Vec3, n: usize, seed: u
 /// (`n` × 2`n` cells), transmitted values (other side than `wi`) times
 /// `trans_scale` (η² to undo radiance scaling): the albedo, independent of
 /// the sampling routines.
-pub fn albedo_quadrature(b: &Bsdf, store: &ParamStore, wi: Vec3, n: usize, trans_scale: f32) -> Vec3 {
+pub fn albedo_quadrature(
+    b: &Bsdf,
+    store: &ParamStore,
+    wi: Vec3,
+    n: usize,
+    trans_scale: f32,
+) -> Vec3 {
     let s = si::<f32>(wi);
-    let (dt, dp) = (std::f64::consts::PI / n as f64, std::f64::consts::PI / n as f64);
+    let (dt, dp) = (
+        std::f64::consts::PI / n as f64,
+        std::f64::consts::PI / n as f64,
+    );
     let mut sum = [0.0f64; 3];
     for i in 0..n {
         let theta = (i as f64 + 0.5) * dt;

@@ -30,8 +30,20 @@ impl ThinDielectric {
         let eta = eta_props(node, 1.5046, 1.000277)?;
         Ok(ThinDielectric {
             eta: scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?,
-            specular_reflectance: opt_texture(node, "specular_reflectance", Channels::Rgb, Domain::UnitInterval, ctx)?,
-            specular_transmittance: opt_texture(node, "specular_transmittance", Channels::Rgb, Domain::UnitInterval, ctx)?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_transmittance: opt_texture(
+                node,
+                "specular_transmittance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
         })
     }
 }
@@ -108,7 +120,10 @@ mod tests {
 
     #[test]
     fn pass_through_and_internal_reflections() {
-        let (b, mut store) = build("thindielectric", &[("int_ior", float(1.5)), ("ext_ior", float(1.0))]);
+        let (b, mut store) = build(
+            "thindielectric",
+            &[("int_ior", float(1.5)), ("ext_ior", float(1.0))],
+        );
         for wi in [dir(0.9, 0.1), dir(-0.4, 2.0)] {
             let f = fresnel_dielectric(wi.z.abs(), 1.5).0;
             let r = 2.0 * f / (1.0 + f);
@@ -127,11 +142,17 @@ mod tests {
                 }
             }
             let sd = (n as f32 * r * (1.0 - r)).sqrt();
-            assert!((nr as f32 - n as f32 * r).abs() <= 4.0 * sd + 1.0, "{nr} vs {}", n as f32 * r);
+            assert!(
+                (nr as f32 - n as f32 * r).abs() <= 4.0 * sd + 1.0,
+                "{nr} vs {}",
+                n as f32 * r
+            );
         }
         // eta is differentiable: d weight / d eta of the reflected lobe
         store.set_tangent("b.eta", &[1.0]).unwrap();
-        let bs = b.sample(&store, &si::<Dual>(dir(0.5, 0.0)), 0.0, Vec2::ZERO).unwrap();
+        let bs = b
+            .sample(&store, &si::<Dual>(dir(0.5, 0.0)), 0.0, Vec2::ZERO)
+            .unwrap();
         assert!(bs.weight.x.d > 0.0, "{bs:?}");
     }
 }

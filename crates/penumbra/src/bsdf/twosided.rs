@@ -130,7 +130,15 @@ mod tests {
         let n = node_with_key(
             "twosided",
             "mat",
-            &[("bsdf", nested("mat", "bsdf", "diffuse", &[("reflectance", rgb(0.2, 0.4, 0.6))]))],
+            &[(
+                "bsdf",
+                nested(
+                    "mat",
+                    "bsdf",
+                    "diffuse",
+                    &[("reflectance", rgb(0.2, 0.4, 0.6))],
+                ),
+            )],
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
@@ -156,12 +164,26 @@ mod tests {
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
-        assert!(ctx.store.id("m2.brdf_1.specular_reflectance.value").is_some());
-        let bs = b.sample(&ctx.store, &si::<f32>(wi_b), 0.3, glam::Vec2::splat(0.3)).unwrap();
-        assert!((bs.wo - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6, "{bs:?}");
+        assert!(ctx
+            .store
+            .id("m2.brdf_1.specular_reflectance.value")
+            .is_some());
+        let bs = b
+            .sample(&ctx.store, &si::<f32>(wi_b), 0.3, glam::Vec2::splat(0.3))
+            .unwrap();
+        assert!(
+            (bs.wo - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6,
+            "{bs:?}"
+        );
 
-        let n = node_with_key("twosided", "m3", &[("bsdf", nested("m3", "bsdf", "dielectric", &[]))]);
-        let e = Bsdf::from_node(&n, &mut LoadContext::default()).unwrap_err().to_string();
+        let n = node_with_key(
+            "twosided",
+            "m3",
+            &[("bsdf", nested("m3", "bsdf", "dielectric", &[]))],
+        );
+        let e = Bsdf::from_node(&n, &mut LoadContext::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("transmits"), "{e}");
     }
 }
