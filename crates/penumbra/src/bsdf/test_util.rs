@@ -109,8 +109,6 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
         // ~0.1 rad at the pole need more (alpha ≥ 0.1 is tested)
         let t = Chi2Test {
             samples: 100_000,
-                .map(|v| v.parse().unwrap())
-                .unwrap_or(12),
             seed: 101 + i as u64,
             ..Chi2Test::default()
         };
