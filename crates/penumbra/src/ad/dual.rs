@@ -121,8 +121,9 @@ impl Div for Dual {
     type Output = Dual;
     #[inline(always)]
     fn div(self, o: Dual) -> Dual {
-        let inv = 1.0 / o.v;
-        Dual::new(self.v * inv, (self.d - self.v * inv * o.d) * inv)
+        // primal by a true division, so that f32 and Dual primals agree
+        let v = self.v / o.v;
+        Dual::new(v, (self.d - v * o.d) / o.v)
     }
 }
 impl Neg for Dual {

@@ -1,0 +1,190 @@
+//! `blendbsdf`: a linear blend of two BSDFs, `(1 − w) f0 + w f1`.
+
+use super::{nested_bsdfs, Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::Spectrum;
+use crate::params::{Domain, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture, TextureT};
+use glam::{Vec2, Vec3};
+
+/// Blend of two nested BSDFs (keys `<key>.bsdf_0`, `<key>.bsdf_1`) by
+/// `weight` (float or texture in [0, 1], required; 0 = first, 1 =
+/// second). Sampling picks a component with probability (1 − w, w); smooth
+/// samples get the blend's pdf and `eval / pdf` as weight (one-sample MIS
+/// over the components), delta samples the component's weight.
+#[derive(Clone, Debug)]
+pub struct BlendBsdf {
+    pub weight: Texture,
+    pub bsdfs: [Box<Bsdf>; 2],
+}
+
+impl BlendBsdf {
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<BlendBsdf> {
+        let weight = Texture::from_prop(
+            node,
+            "weight",
+            None,
+            Channels::Mono,
+            Domain::UnitInterval,
+            ctx,
+        )?;
+        let nested = nested_bsdfs(node, &["bsdf_0", "bsdf_1"])?;
+        if nested.len() != 2 {
+            return Err(node.error(format!("expects two nested BSDFs, found {}", nested.len())));
+        }
+        let b0 = Bsdf::from_node(&nested[0], ctx)?;
+        let b1 = Bsdf::from_node(&nested[1], ctx)?;
+        Ok(BlendBsdf {
+            weight,
+            bsdfs: [Box::new(b0), Box::new(b1)],
+        })
+    }
+
+    pub fn parameters_changed(&mut self, store: &ParamStore) {
+        for b in &mut self.bsdfs {
+            b.parameters_changed(store);
+        }
+    }
+
+    fn w<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+        self.weight.eval_1(store, si).clamp(0.0, 1.0)
+    }
+}
+
+impl BsdfT for BlendBsdf {
+    fn flags(&self) -> BsdfFlags {
+        self.bsdfs[0].flags().union(self.bsdfs[1].flags())
+    }
+
+    fn eval<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        wo: Vec3,
+    ) -> Spectrum<R> {
+        let w = self.w(store, si);
+        self.bsdfs[0].eval(store, si, wo) * (-w + 1.0) + self.bsdfs[1].eval(store, si, wo) * w
+    }
+
+    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+        let w = self.w(store, si).val();
+        let mut p = 0.0;
+        if w < 1.0 {
+            p += (1.0 - w) * self.bsdfs[0].pdf(store, si, wo);
+        }
+        if w > 0.0 {
+            p += w * self.bsdfs[1].pdf(store, si, wo);
+        }
+        p
+    }
+
+    fn sample<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        u1: f32,
+        u2: Vec2,
+    ) -> Option<BsdfSample<R>> {
+        let w_r = self.w(store, si);
+        let w = w_r.val();
+        let (idx, prob, prob_r, u1) = if u1 >= w {
+            (
+                0,
+                1.0 - w,
+                -w_r + 1.0,
+                ((u1 - w) / (1.0 - w)).min(1.0 - f32::EPSILON),
+            )
+        } else {
+            (1, w, w_r, (u1 / w).min(1.0 - f32::EPSILON))
+        };
+        if !(prob > 0.0) {
+            return None;
+        }
+        let mut bs = self.bsdfs[idx].sample(store, si, u1, u2)?;
+        if bs.lobe.has(BsdfFlags::DELTA) {
+            bs.pdf *= prob;
+            bs.weight *= prob_r / prob;
+        } else {
+            bs.pdf = self.pdf(store, si, bs.wo);
+            if !(bs.pdf > 0.0) {
+                return None;
+            }
+            bs.weight = self.eval(store, si, bs.wo).scale(1.0 / bs.pdf);
+        }
+        Some(bs)
+    }
+
+    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        let w = self.w(store, si);
+        self.bsdfs[0].albedo(store, si) * (-w + 1.0) + self.bsdfs[1].albedo(store, si) * w
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::*;
+    use super::super::{Bsdf, BsdfFlags, BsdfT};
+    use crate::ad::Dual;
+    use crate::scene::LoadContext;
+
+    #[test]
+    fn blend_values_sampling_and_derivative() {
+        let n = node_with_key(
+            "blendbsdf",
+            "bl",
+            &[
+                ("weight", float(0.3)),
+                ("a", nested("bl", "a", "diffuse", &[])),
+                (
+                    "b",
+                    nested("bl", "b", "roughconductor", &[("alpha", float(0.3))]),
+                ),
+            ],
+        );
+        let mut ctx = LoadContext::default();
+        let b = Bsdf::from_node(&n, &mut ctx).unwrap();
+        let mut store = ctx.store;
+        for k in [
+            "bl.weight.value",
+            "bl.bsdf_0.reflectance.value",
+            "bl.bsdf_1.alpha.value",
+        ] {
+            assert!(store.id(k).is_some(), "{k}");
+        }
+        let Bsdf::BlendBsdf(bb) = &b else { panic!() };
+        let wi = dir(0.7, 0.0);
+        let wo = dir(0.6, 3.0);
+        let s = si::<f32>(wi);
+        let want = bb.bsdfs[0].eval(&store, &s, wo).val() * 0.7
+            + bb.bsdfs[1].eval(&store, &s, wo).val() * 0.3;
+        assert!((eval_f32(&b, &store, wi, wo) - want).abs().max_element() < 1e-6);
+        check_smooth(&b, &store, &[wi, dir(0.2, 1.0)], 1);
+        store.set_tangent("bl.weight.value", &[1.0]).unwrap();
+        let d = b.eval(&store, &si::<Dual>(wi), wo);
+        let diff = bb.bsdfs[1].eval(&store, &s, wo).val() - bb.bsdfs[0].eval(&store, &s, wo).val();
+        assert!((d.x.d - diff.x).abs() < 1e-5);
+
+        // blend with a delta lobe: its samples carry the component weight
+        let n = node_with_key(
+            "blendbsdf",
+            "b2",
+            &[
+                ("weight", float(0.5)),
+                ("a", nested("b2", "a", "diffuse", &[])),
+                ("b", nested("b2", "b", "conductor", &[])),
+            ],
+        );
+        let mut ctx = LoadContext::default();
+        let b = Bsdf::from_node(&n, &mut ctx).unwrap();
+        let bs = b
+            .sample(&ctx.store, &si::<f32>(wi), 0.1, glam::Vec2::splat(0.5))
+            .unwrap();
+        assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
+        assert!((bs.pdf - 0.5).abs() < 1e-6 && (bs.weight.x - 1.0).abs() < 1e-6);
+        let (a, se) = albedo_estimate(&b, &ctx.store, wi, 20_000, 1);
+        assert!((a.x - 0.75).abs() < 4.0 * se.x + 1e-4, "{a} ± {se}");
+    }
+}

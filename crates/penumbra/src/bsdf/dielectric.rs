@@ -1,0 +1,235 @@
+//! `dielectric`: a smooth interface between two dielectrics (glass,
+//! water): delta reflection and refraction weighted by the Fresnel terms.
+
+use super::fresnel::fresnel_dielectric;
+use super::{default_albedo, eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::{Spectrum, V3};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture, TextureT};
+use glam::{Vec2, Vec3};
+
+/// Smooth dielectric. Parameters (Mitsuba 3): `int_ior` (default bk7,
+/// 1.5046), `ext_ior` (default air), numbers or material names;
+/// `specular_reflectance`, `specular_transmittance` (optional, default 1).
+/// The relative index `eta = int_ior / ext_ior` is parameter `<key>.eta`
+/// (not differentiable, as in Mitsuba).
+///
+/// Transport is radiance (camera paths): refracted weights carry the
+/// `1/η²` solid-angle compression factor.
+#[derive(Clone, Debug)]
+pub struct Dielectric {
+    pub eta: ParamId,
+    pub specular_reflectance: Option<Texture>,
+    pub specular_transmittance: Option<Texture>,
+}
+
+impl Dielectric {
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Dielectric> {
+        let eta = eta_props(node, 1.5046, 1.000277)?;
+        Ok(Dielectric {
+            eta: scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_transmittance: opt_texture(
+                node,
+                "specular_transmittance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+        })
+    }
+}
+
+/// Samples the delta reflection / refraction of a smooth interface with
+/// relative index `eta`; shared by `dielectric`. `weight` is the lobe's
+/// R-valued Fresnel term (times the optional tints) over its primal
+/// selection probability.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_smooth_interface<R: Real>(
+    store: &ParamStore,
+    si: &SurfaceInteraction<R>,
+    eta: R,
+    refl: &Option<Texture>,
+    trans: &Option<Texture>,
+    u1: f32,
+) -> Option<BsdfSample<R>> {
+    let wi = si.wi.val();
+    if wi.z == 0.0 {
+        return None;
+    }
+    let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
+    let r = f.val();
+    let t = 1.0 - r;
+    if u1 < r {
+        let mut w = V3::splat(f / r);
+        if let Some(tex) = refl {
+            w = w.mul_elem(tex.eval(store, si));
+        }
+        Some(BsdfSample {
+            wo: Vec3::new(-wi.x, -wi.y, wi.z),
+            pdf: r,
+            weight: w,
+            eta: 1.0,
+            lobe: BsdfFlags::DELTA_REFLECTION,
+        })
+    } else {
+        if !(t > 0.0) {
+            return None;
+        }
+        let eti = eta_ti.val();
+        let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
+        // radiance is scaled by η_ti² crossing the interface
+        let mut w = V3::splat((-f + 1.0) * eta_ti * eta_ti / t);
+        if let Some(tex) = trans {
+            w = w.mul_elem(tex.eval(store, si));
+        }
+        Some(BsdfSample {
+            wo,
+            pdf: t,
+            weight: w,
+            eta: eta_it.val(),
+            lobe: BsdfFlags::DELTA_TRANSMISSION,
+        })
+    }
+}
+
+impl BsdfT for Dielectric {
+    fn flags(&self) -> BsdfFlags {
+        BsdfFlags::DELTA_REFLECTION
+            .union(BsdfFlags::DELTA_TRANSMISSION)
+            .union(BsdfFlags::TWO_SIDED)
+    }
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        u1: f32,
+        _u2: Vec2,
+    ) -> Option<BsdfSample<R>> {
+        let eta = store.read::<R>(self.eta, 0);
+        sample_smooth_interface(
+            store,
+            si,
+            eta,
+            &self.specular_reflectance,
+            &self.specular_transmittance,
+            u1,
+        )
+    }
+    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        default_albedo(self, store, si)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::*;
+    use super::super::{BsdfFlags, BsdfT};
+    use crate::bsdf::fresnel::fresnel_dielectric;
+    use crate::testing::Pcg32;
+    use glam::{Vec2, Vec3};
+
+    #[test]
+    fn snell_fresnel_and_energy() {
+        let (b, store) = build(
+            "dielectric",
+            &[("int_ior", string("water")), ("ext_ior", string("air"))],
+        );
+        let eta = 1.3330f32 / 1.000277;
+        assert!((store.data(store.id("b.eta").unwrap())[0] - eta).abs() < 1e-6);
+        for wi in [
+            dir(0.8, 0.4),
+            dir(0.2, 2.0),
+            dir(-0.8, 0.4),
+            dir(-0.5, 1.0),
+            dir(-0.9, 5.0),
+        ] {
+            let s = si::<f32>(wi);
+            let (f, ..) = fresnel_dielectric(wi.z, eta);
+            let mut rng = Pcg32::new(3);
+            let (mut nr, n) = (0, 4000);
+            for _ in 0..n {
+                let bs = b.sample(&store, &s, rng.next_f32(), Vec2::ZERO).unwrap();
+                if bs.lobe == BsdfFlags::DELTA_REFLECTION {
+                    nr += 1;
+                    assert!((bs.wo - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
+                    assert!((bs.weight.x - 1.0).abs() < 1e-5 && (bs.pdf - f).abs() < 1e-6);
+                } else {
+                    assert_eq!(bs.lobe, BsdfFlags::DELTA_TRANSMISSION);
+                    // Snell's law: η_i sin θi = η_t sin θt, opposite sides
+                    let (ni, nt) = if wi.z > 0.0 { (1.0, eta) } else { (eta, 1.0) };
+                    let si_ = (1.0 - wi.z * wi.z).sqrt();
+                    let st = (1.0 - bs.wo.z * bs.wo.z).sqrt();
+                    assert!((ni * si_ - nt * st).abs() < 1e-5 && bs.wo.z * wi.z < 0.0);
+                    assert!((bs.wo.length() - 1.0).abs() < 1e-5);
+                    assert!((bs.wo.x * wi.y - bs.wo.y * wi.x).abs() < 1e-6, "same plane");
+                    // radiance scaling (η_i/η_t)²; energy weight × η² = 1
+                    assert!((bs.weight.x - (ni / nt).powi(2)).abs() < 1e-5);
+                    assert!((bs.eta - nt / ni).abs() < 1e-5);
+                }
+            }
+            // reflection frequency ~ Binomial(n, F)
+            let sd = (n as f32 * f * (1.0 - f)).sqrt();
+            assert!(
+                (nr as f32 - n as f32 * f).abs() <= 4.0 * sd + 1.0,
+                "{wi:?}: {nr} vs {}",
+                n as f32 * f
+            );
+            let (a, _) = albedo_estimate(&b, &store, wi, 2000, 9);
+            assert!((a.x - 1.0).abs() < 1e-4, "{a}");
+            assert!(
+                eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO
+                    && pdf_f32(&b, &store, wi, -wi) == 0.0
+            );
+        }
+        // total internal reflection from inside at grazing angles
+        let bs = b
+            .sample(&store, &si::<f32>(dir(-0.2, 0.0)), 0.999, Vec2::ZERO)
+            .unwrap();
+        assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
+    }
+
+    #[test]
+    fn tints_and_errors() {
+        let (b, store) = build(
+            "dielectric",
+            &[
+                ("int_ior", float(1.5)),
+                ("specular_transmittance", rgb(0.5, 0.5, 0.5)),
+            ],
+        );
+        assert!(store.id("b.specular_transmittance.value").is_some());
+        assert!(store.id("b.specular_reflectance.value").is_none());
+        let bs = b
+            .sample(&store, &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO)
+            .unwrap();
+        assert!(
+            (bs.weight.x - 0.5 / (1.5f32 / 1.000277).powi(2)).abs() < 1e-5,
+            "{bs:?}"
+        );
+        let n = node_with_key("dielectric", "b", &[("int_ior", string("glass"))]);
+        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("unknown material 'glass'") && e.contains("bk7"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,111 @@
+//! `diffuse`: the ideal Lambertian reflector.
+
+use super::{BsdfFlags, BsdfSample, BsdfT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::{warp, Spectrum, V3};
+use crate::params::{Domain, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture, TextureT};
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+/// Lambertian reflection `f = reflectance / π` on the front side (+z).
+/// Parameter: `reflectance` (float, rgb or texture, default 0.5).
+#[derive(Clone, Debug)]
+pub struct Diffuse {
+    pub reflectance: Texture,
+}
+
+impl Diffuse {
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Diffuse> {
+        Ok(Diffuse {
+            reflectance: Texture::from_prop(
+                node,
+                "reflectance",
+                Some(0.5),
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+        })
+    }
+}
+
+impl BsdfT for Diffuse {
+    fn flags(&self) -> BsdfFlags {
+        BsdfFlags::DIFFUSE_REFLECTION
+    }
+
+    fn eval<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        wo: Vec3,
+    ) -> Spectrum<R> {
+        if !(si.wi.z.val() > 0.0 && wo.z > 0.0) {
+            return V3::zero();
+        }
+        self.reflectance.eval(store, si).scale(wo.z * FRAC_1_PI)
+    }
+
+    fn pdf<R: Real>(&self, _store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+        if !(si.wi.z.val() > 0.0) {
+            return 0.0;
+        }
+        warp::square_to_cosine_hemisphere_pdf(wo)
+    }
+
+    fn sample<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        _u1: f32,
+        u2: Vec2,
+    ) -> Option<BsdfSample<R>> {
+        if !(si.wi.z.val() > 0.0) {
+            return None;
+        }
+        let wo = warp::square_to_cosine_hemisphere(u2);
+        let pdf = warp::square_to_cosine_hemisphere_pdf(wo);
+        if !(pdf > 0.0) {
+            return None;
+        }
+        Some(BsdfSample {
+            wo,
+            pdf,
+            // f cos / pdf = reflectance exactly (cos/π cancels)
+            weight: self.reflectance.eval(store, si),
+            eta: 1.0,
+            lobe: BsdfFlags::DIFFUSE_REFLECTION,
+        })
+    }
+
+    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        self.reflectance.eval(store, si)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::*;
+    use glam::Vec3;
+
+    #[test]
+    fn diffuse_sampling_and_values() {
+        let (b, store) = build("diffuse", &[("reflectance", rgb(0.2, 0.5, 0.8))]);
+        assert!(store.id("b.reflectance.value").is_some());
+        let wi = dir(0.4, 0.7);
+        let f = eval_f32(&b, &store, wi, dir(0.2, 0.5));
+        assert!((f.y - 0.5 / std::f32::consts::PI * dir(0.2, 0.5).z).abs() < 1e-6);
+        assert!(eval_f32(&b, &store, Vec3::new(0.0, 0.6, -0.8), Vec3::Z) == glam::Vec3::ZERO);
+        assert!(eval_f32(&b, &store, wi, -Vec3::Z) == glam::Vec3::ZERO);
+        check_smooth(&b, &store, &[wi, Vec3::Z, dir(0.05, 2.0)], 1);
+        let (a, _) = albedo_estimate(&b, &store, wi, 20_000, 3);
+        assert!(
+            (a.x - 0.2).abs() < 1e-5 && (a.z - 0.8).abs() < 1e-5,
+            "{a:?}"
+        );
+    }
+}

@@ -1,0 +1,76 @@
+//! `null`: an index-matched, invisible surface (medium boundaries,
+//! cut-outs): light passes straight through.
+
+use super::{BsdfFlags, BsdfSample, BsdfT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::{Spectrum, V3};
+use crate::params::ParamStore;
+use crate::scene::{LoadContext, Node};
+use glam::{Vec2, Vec3};
+
+/// Null BSDF: a `NULL` lobe with `wo = −wi` and weight 1; no parameters.
+#[derive(Clone, Debug, Default)]
+pub struct Null;
+
+impl Null {
+    pub fn from_node(_node: &Node, _ctx: &mut LoadContext) -> Result<Null> {
+        Ok(Null)
+    }
+}
+
+impl BsdfT for Null {
+    fn flags(&self) -> BsdfFlags {
+        BsdfFlags::NULL.union(BsdfFlags::TWO_SIDED)
+    }
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample<R: Real>(
+        &self,
+        _: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        _u1: f32,
+        _u2: Vec2,
+    ) -> Option<BsdfSample<R>> {
+        Some(BsdfSample {
+            wo: -si.wi.val(),
+            pdf: 1.0,
+            weight: V3::splat(R::cst(1.0)),
+            eta: 1.0,
+            lobe: BsdfFlags::NULL,
+        })
+    }
+    fn albedo<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::*;
+    use super::super::{BsdfFlags, BsdfT};
+
+    #[test]
+    fn passes_through() {
+        let (b, store) = build("null", &[]);
+        for wi in [dir(0.3, 1.0), dir(-0.8, 2.0)] {
+            let bs = b
+                .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
+                .unwrap();
+            assert_eq!(bs.lobe, BsdfFlags::NULL);
+            assert_eq!(bs.wo, -wi);
+            assert_eq!(bs.weight.val(), glam::Vec3::ONE);
+            assert!(eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO);
+        }
+        let n = node_with_key("null", "b", &[("reflectance", float(0.5))]);
+        let e = crate::bsdf::Bsdf::from_node(&n, &mut Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown parameter 'reflectance'"), "{e}");
+    }
+}

@@ -1,0 +1,226 @@
+//! Shared helpers of the BSDF tests: building plugins from properties,
+//! surface interactions with a given incident direction, the χ² and
+//! consistency checks of sampling, and Monte Carlo albedo estimates.
+
+use super::{Bsdf, BsdfFlags, BsdfT};
+use crate::ad::Real;
+use crate::error::SrcLoc;
+use crate::geometry::SurfaceInteraction;
+use crate::math::{Frame, Spectrum, V2, V3};
+use crate::params::ParamStore;
+use crate::scene::{Class, LoadContext, Node, Prop, Value};
+use crate::testing::{Chi2Test, Pcg32};
+use glam::Vec3;
+use std::rc::Rc;
+
+pub fn loc() -> SrcLoc {
+    SrcLoc {
+        file: "test.xml".into(),
+        line: 1,
+    }
+}
+
+pub fn rgb(r: f32, g: f32, b: f32) -> Value {
+    Value::Rgb(Vec3::new(r, g, b))
+}
+pub fn float(v: f64) -> Value {
+    Value::Float(v)
+}
+pub fn string(s: &str) -> Value {
+    Value::Str(s.into())
+}
+pub fn boolean(b: bool) -> Value {
+    Value::Bool(b)
+}
+
+/// A `<bsdf type=plugin>` node with key `key` and the given properties.
+pub fn node_with_key(plugin: &str, key: &str, props: &[(&str, Value)]) -> Node {
+    let mut n = Node::new(Class::Bsdf, plugin, None, key.into(), loc());
+    for (name, v) in props {
+        n.props.push(Prop::new(*name, v.clone(), loc()));
+    }
+    n
+}
+
+/// A nested, unnamed bsdf property value (key `<parent>.bsdf`).
+pub fn nested(parent_key: &str, name: &str, plugin: &str, props: &[(&str, Value)]) -> Value {
+    Value::Node(Rc::new(node_with_key(
+        plugin,
+        &format!("{parent_key}.{name}"),
+        props,
+    )))
+}
+
+/// Builds plugin `plugin` with key "b".
+pub fn build(plugin: &str, props: &[(&str, Value)]) -> (Bsdf, ParamStore) {
+    let n = node_with_key(plugin, "b", props);
+    let mut ctx = LoadContext::default();
+    let b = Bsdf::from_node(&n, &mut ctx).unwrap_or_else(|e| panic!("{e}"));
+    (b, ctx.store)
+}
+
+/// A direction with cos θ = `cos_theta` and azimuth `phi`.
+pub fn dir(cos_theta: f32, phi: f32) -> Vec3 {
+    let s = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    Vec3::new(s * phi.cos(), s * phi.sin(), cos_theta)
+}
+
+/// A surface interaction at the origin with the standard frame and the
+/// given local incident direction.
+pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
+    SurfaceInteraction {
+        t: R::cst(1.0),
+        p: V3::zero(),
+        n: V3::cst(Vec3::Z),
+        sh_frame: Frame {
+            s: V3::cst(Vec3::X),
+            t: V3::cst(Vec3::Y),
+            n: V3::cst(Vec3::Z),
+        },
+        uv: V2::new(R::cst(0.5), R::cst(0.5)),
+        wi: V3::cst(wi),
+        shape: 0,
+        prim: 0,
+    }
+}
+
+pub fn eval_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> Vec3 {
+    b.eval(store, &si::<f32>(wi), wo).val()
+}
+
+pub fn pdf_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> f32 {
+    b.pdf(store, &si::<f32>(wi), wo)
+}
+
+fn close(a: f32, b: f32, rel: f32) -> bool {
+    (a - b).abs() <= rel * a.abs().max(b.abs()) + 1e-6
+}
+
+/// For each incident direction: a χ² test of the smooth lobes' sampling
+/// against `pdf` (threshold 1e-3 divided by the number of χ² tests,
+/// `wis.len() × tests_in_fn`), ∫ pdf ≤ 1, and for sampled directions of
+/// smooth lobes `pdf(wo)` = the sample's pdf and `eval(wo) / pdf(wo)` =
+/// its weight.
+pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usize) {
+    let threshold = 1e-3 / (wis.len() * tests_in_fn) as f64;
+    for (i, &wi) in wis.iter().enumerate() {
+        let s = si::<f32>(wi);
+        // default pdf integration (12² points per bin): lobes narrower than
+        // ~0.1 rad at the pole need more (alpha ≥ 0.1 is tested)
+        let t = Chi2Test {
+            samples: 100_000,
+            seed: 101 + i as u64,
+            ..Chi2Test::default()
+        };
+        let mut checked = 0;
+        let r = t.run(
+            |rng: &mut Pcg32| {
+                let u1 = rng.next_f32();
+                let u2 = rng.next_2d();
+                let bs = b.sample(store, &s, u1, u2)?;
+                assert!(bs.weight.is_finite() && bs.pdf > 0.0, "wi {wi:?}: {bs:?}");
+                if bs.lobe.has(BsdfFlags::DELTA) {
+                    return None;
+                }
+                if checked < 2000 {
+                    checked += 1;
+                    let p = b.pdf(store, &s, bs.wo);
+                    assert!(
+                        close(p, bs.pdf, 2e-3),
+                        "wi {wi:?} wo {:?}: pdf {p} vs sample pdf {}",
+                        bs.wo,
+                        bs.pdf
+                    );
+                    let f = b.eval(store, &s, bs.wo).val() / p;
+                    let w = bs.weight.val();
+                    for c in 0..3 {
+                        assert!(
+                            close(f[c], w[c], 2e-3),
+                            "wi {wi:?} wo {:?}: eval/pdf {f} vs weight {w}",
+                            bs.wo
+                        );
+                    }
+                }
+                Some(bs.wo)
+            },
+            |wo| b.pdf(store, &s, wo),
+        );
+        assert!(r.p_value > threshold, "{b:?} wi {wi:?}: χ² failed: {r:?}");
+        assert!(
+            r.pdf_integral <= 1.0 + 1e-2,
+            "{b:?} wi {wi:?}: ∫pdf = {}",
+            r.pdf_integral
+        );
+    }
+}
+
+/// Monte Carlo estimate of the directional albedo ∫ f |cos| dωo from
+/// `sample` weights (transmitted weights times η², undoing the radiance
+/// scaling of refraction, so that the result is the energy fraction):
+/// returns (mean, standard error) per channel.
+pub fn albedo_estimate(
+    b: &Bsdf,
+    store: &ParamStore,
+    wi: Vec3,
+    n: usize,
+    seed: u64,
+) -> (Vec3, Vec3) {
+    let s = si::<f32>(wi);
+    let mut rng = Pcg32::new(seed);
+    let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
+    for _ in 0..n {
+        let u1 = rng.next_f32();
+        let u2 = rng.next_2d();
+        if let Some(bs) = b.sample(store, &s, u1, u2) {
+            let w: Spectrum<f32> = bs.weight.scale(bs.eta * bs.eta);
+            for c in 0..3 {
+                sum[c] += w[c] as f64;
+                sum2[c] += (w[c] as f64).powi(2);
+            }
+        }
+    }
+    let mut mean = Vec3::ZERO;
+    let mut se = Vec3::ZERO;
+    for c in 0..3 {
+        let m = sum[c] / n as f64;
+        let var = (sum2[c] / n as f64 - m * m).max(0.0);
+        mean[c] = m as f32;
+        se[c] = (var / n as f64).sqrt() as f32;
+    }
+    (mean, se)
+}
+
+/// ∫ eval(wi, wo) dωo over the sphere by the midpoint rule in (θ, φ)
+/// (`n` × 2`n` cells), transmitted values (other side than `wi`) times
+/// `trans_scale` (η² to undo radiance scaling): the albedo, independent of
+/// the sampling routines.
+pub fn albedo_quadrature(
+    b: &Bsdf,
+    store: &ParamStore,
+    wi: Vec3,
+    n: usize,
+    trans_scale: f32,
+) -> Vec3 {
+    let s = si::<f32>(wi);
+    let (dt, dp) = (
+        std::f64::consts::PI / n as f64,
+        std::f64::consts::PI / n as f64,
+    );
+    let mut sum = [0.0f64; 3];
+    for i in 0..n {
+        let theta = (i as f64 + 0.5) * dt;
+        let (st, ct) = theta.sin_cos();
+        for j in 0..2 * n {
+            let phi = (j as f64 + 0.5) * dp;
+            let wo = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
+            let mut f = b.eval(store, &s, wo).val();
+            if wo.z * wi.z < 0.0 {
+                f *= trans_scale;
+            }
+            for c in 0..3 {
+                sum[c] += f[c] as f64 * st * dt * dp;
+            }
+        }
+    }
+    Vec3::new(sum[0] as f32, sum[1] as f32, sum[2] as f32)
+}

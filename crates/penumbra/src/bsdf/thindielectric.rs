@@ -1,0 +1,158 @@
+//! `thindielectric`: a thin dielectric slab (window pane) with both
+//! interfaces and all internal reflections folded into one surface;
+//! transmitted light continues undeflected.
+
+use super::fresnel::fresnel_dielectric;
+use super::{default_albedo, eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::SurfaceInteraction;
+use crate::math::{Spectrum, V3};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::scene::{LoadContext, Node};
+use crate::texture::{Channels, Texture, TextureT};
+use glam::{Vec2, Vec3};
+
+/// Thin dielectric. Parameters (Mitsuba 3): `int_ior` (default bk7),
+/// `ext_ior` (default air), `specular_reflectance`,
+/// `specular_transmittance` (optional). Reflectance including the
+/// internal bounces: `R' = R + T² R / (1 − R²) = 2R / (1 + R)`. As in
+/// Mitsuba, the transmitted lobe is a `NULL` (pass-through) lobe.
+#[derive(Clone, Debug)]
+pub struct ThinDielectric {
+    pub eta: ParamId,
+    pub specular_reflectance: Option<Texture>,
+    pub specular_transmittance: Option<Texture>,
+}
+
+impl ThinDielectric {
+    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<ThinDielectric> {
+        let eta = eta_props(node, 1.5046, 1.000277)?;
+        Ok(ThinDielectric {
+            eta: scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?,
+            specular_reflectance: opt_texture(
+                node,
+                "specular_reflectance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+            specular_transmittance: opt_texture(
+                node,
+                "specular_transmittance",
+                Channels::Rgb,
+                Domain::UnitInterval,
+                ctx,
+            )?,
+        })
+    }
+}
+
+impl BsdfT for ThinDielectric {
+    fn flags(&self) -> BsdfFlags {
+        BsdfFlags::DELTA_REFLECTION
+            .union(BsdfFlags::NULL)
+            .union(BsdfFlags::TWO_SIDED)
+    }
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample<R: Real>(
+        &self,
+        store: &ParamStore,
+        si: &SurfaceInteraction<R>,
+        u1: f32,
+        _u2: Vec2,
+    ) -> Option<BsdfSample<R>> {
+        let wi = si.wi.val();
+        let eta = store.read::<R>(self.eta, 0);
+        let (mut f, ..) = fresnel_dielectric(si.wi.z.abs(), eta);
+        if f.val() < 1.0 {
+            f = f * 2.0 / (f + 1.0);
+        }
+        let r = f.val();
+        let t = 1.0 - r;
+        if u1 < r {
+            let mut w = V3::splat(f / r);
+            if let Some(tex) = &self.specular_reflectance {
+                w = w.mul_elem(tex.eval(store, si));
+            }
+            Some(BsdfSample {
+                wo: Vec3::new(-wi.x, -wi.y, wi.z),
+                pdf: r,
+                weight: w,
+                eta: 1.0,
+                lobe: BsdfFlags::DELTA_REFLECTION,
+            })
+        } else {
+            if !(t > 0.0) {
+                return None;
+            }
+            let mut w = V3::splat((-f + 1.0) / t);
+            if let Some(tex) = &self.specular_transmittance {
+                w = w.mul_elem(tex.eval(store, si));
+            }
+            Some(BsdfSample {
+                wo: -wi,
+                pdf: t,
+                weight: w,
+                eta: 1.0,
+                lobe: BsdfFlags::NULL,
+            })
+        }
+    }
+    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        default_albedo(self, store, si)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::*;
+    use super::super::{BsdfFlags, BsdfT};
+    use crate::ad::Dual;
+    use crate::bsdf::fresnel::fresnel_dielectric;
+    use crate::testing::Pcg32;
+    use glam::Vec2;
+
+    #[test]
+    fn pass_through_and_internal_reflections() {
+        let (b, mut store) = build(
+            "thindielectric",
+            &[("int_ior", float(1.5)), ("ext_ior", float(1.0))],
+        );
+        for wi in [dir(0.9, 0.1), dir(-0.4, 2.0)] {
+            let f = fresnel_dielectric(wi.z.abs(), 1.5).0;
+            let r = 2.0 * f / (1.0 + f);
+            let s = si::<f32>(wi);
+            let mut rng = Pcg32::new(1);
+            let (mut nr, n) = (0, 4000);
+            for _ in 0..n {
+                let bs = b.sample(&store, &s, rng.next_f32(), Vec2::ZERO).unwrap();
+                assert!((bs.weight.x - 1.0).abs() < 1e-5 && bs.eta == 1.0);
+                if bs.lobe == BsdfFlags::DELTA_REFLECTION {
+                    nr += 1;
+                    assert!((bs.wo.z - wi.z).abs() < 1e-6 && (bs.wo.x + wi.x).abs() < 1e-6);
+                } else {
+                    assert_eq!(bs.lobe, BsdfFlags::NULL);
+                    assert!((bs.wo + wi).length() < 1e-6);
+                }
+            }
+            let sd = (n as f32 * r * (1.0 - r)).sqrt();
+            assert!(
+                (nr as f32 - n as f32 * r).abs() <= 4.0 * sd + 1.0,
+                "{nr} vs {}",
+                n as f32 * r
+            );
+        }
+        // eta is differentiable: d weight / d eta of the reflected lobe
+        store.set_tangent("b.eta", &[1.0]).unwrap();
+        let bs = b
+            .sample(&store, &si::<Dual>(dir(0.5, 0.0)), 0.0, Vec2::ZERO)
+            .unwrap();
+        assert!(bs.weight.x.d > 0.0, "{bs:?}");
+    }
+}
