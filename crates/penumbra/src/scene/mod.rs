@@ -182,8 +182,14 @@ impl Scene {
         {
             self.accel.update(&self.shapes, &self.params);
         }
+        if changed.is_empty() {
+            return;
+        }
         for e in &mut self.emitters {
             e.parameters_changed(&self.params, &changed);
+        }
+        for b in &mut self.bsdfs {
+            b.parameters_changed(&self.params);
         }
     }
 }
