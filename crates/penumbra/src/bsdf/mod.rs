@@ -206,6 +206,10 @@ impl Bsdf {
     /// Builds a `<bsdf>` node (nested BSDFs recursively) and checks that
     /// every parameter of every node it built was used.
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Bsdf> {
+        let shared = node.id.is_some().then_some(node as *const Node);
+        if let Some(b) = shared.and_then(|p| ctx.shared_bsdfs.get(&p)) {
+            return Ok(b.clone());
+        }
         let mut b = match node.plugin.as_str() {
             "diffuse" => Bsdf::Diffuse(Diffuse::from_node(node, ctx)?),
             "conductor" => Bsdf::Conductor(Conductor::from_node(node, ctx)?),
@@ -228,6 +232,9 @@ impl Bsdf {
         };
         node.check_all_used()?;
         b.parameters_changed(&ctx.store);
+        if let Some(p) = shared {
+            ctx.shared_bsdfs.insert(p, b.clone());
+        }
         Ok(b)
     }
 

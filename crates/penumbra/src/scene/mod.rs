@@ -9,6 +9,8 @@ pub use xml::{child_key, parse_file, parse_str};
 
 use crate::error::{Error, Result};
 use crate::params::ParamStore;
+use crate::texture::Texture;
+use std::collections::HashMap;
 use std::path::PathBuf;
 
 /// State shared by plugin constructors while a scene is built.
@@ -16,6 +18,11 @@ use std::path::PathBuf;
 pub struct LoadContext {
     /// Where constructors register their parameters.
     pub store: ParamStore,
+    /// BSDFs and textures built from nodes with an id, which may be
+    /// referenced from several places: built once, then shared (their
+    /// parameters exist once in the store).
+    pub(crate) shared_bsdfs: HashMap<*const Node, Bsdf>,
+    pub(crate) shared_textures: HashMap<*const Node, Texture>,
 }
 
 impl LoadContext {

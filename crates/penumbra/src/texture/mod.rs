@@ -123,6 +123,10 @@ impl Texture {
     /// Builds a `<texture>` node (and checks that all its parameters were
     /// used).
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Texture> {
+        let shared = node.id.is_some().then_some(node as *const Node);
+        if let Some(t) = shared.and_then(|p| ctx.shared_textures.get(&p)) {
+            return Ok(t.clone());
+        }
         let t = match node.plugin.as_str() {
             "bitmap" => Texture::Bitmap(Bitmap::from_node(node, ctx)?),
             "checkerboard" => Texture::Checkerboard(Checkerboard::from_node(node, ctx)?),
@@ -134,6 +138,9 @@ impl Texture {
             }
         };
         node.check_all_used()?;
+        if let Some(p) = shared {
+            ctx.shared_textures.insert(p, t.clone());
+        }
         Ok(t)
     }
 }
