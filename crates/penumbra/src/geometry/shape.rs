@@ -41,12 +41,3 @@ impl ShapeT for Shape {
         match *self {}
     }
 }
-// STUB until the geometry branch lands.
-impl Shape {
-    pub fn from_node(
-        node: &crate::scene::Node,
-        _ctx: &mut crate::scene::LoadContext,
-    ) -> crate::error::Result<Shape> {
-        Err(node.error("stub"))
-    }
-}
