@@ -1,0 +1,352 @@
+//! The acceleration structure: one compressed wide BVH (CWBVH, Ylitie et
+//! al. 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed
+//! Wide BVHs"; built by PLOC with reinsertion, via the `obvhs` crate) over
+//! all primitives of all shapes: every triangle of every mesh, and one
+//! primitive per analytic shape (sphere, disk).
+//!
+//! Triangle data for traversal is stored in BVH primitive order in one
+//! compact array (`v0`, `v0 - v1`, `v2 - v0`, their cross product: 64
+//! bytes, one cache line each), so the hot loop has no indirection.
+//! Triangles are two-sided (no backface culling). Analytic primitives sit
+//! in the same array as a sentinel (zero edges, index in `v0.x`) handled
+//! off the hot path.
+//!
+//! After vertex positions (or sphere/disk parameters) change, [`Accel::update`]
+//! refits the binary BVH kept from the build (same topology, new boxes) and
+//! re-derives the wide BVH from it, without a new PLOC build.
+
+use crate::geometry::shapes::disk::DiskFrame;
+use crate::geometry::shapes::{Disk, Sphere};
+use crate::geometry::{Hit, Ray, Shape};
+use crate::params::ParamStore;
+use glam::{UVec2, Vec2, Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
+use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ploc::PlocBuilder;
+use obvhs::BvhBuildParams;
+
+/// A triangle laid out for intersection (as in madmann91's `bvh` library):
+/// `e1 = v0 - v1`, `e2 = v2 - v0`, `ng = e1 × e2`.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C)]
+struct PackedTri {
+    v0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+    ng: Vec3A,
+}
+
+impl PackedTri {
+    fn new(p0: Vec3, p1: Vec3, p2: Vec3) -> PackedTri {
+        let (v0, v1, v2) = (Vec3A::from(p0), Vec3A::from(p1), Vec3A::from(p2));
+        let e1 = v0 - v1;
+        let e2 = v2 - v0;
+        PackedTri {
+            v0,
+            e1,
+            e2,
+            ng: e1.cross(e2),
+        }
+    }
+    fn analytic(index: u32) -> PackedTri {
+        PackedTri {
+            v0: Vec3A::new(f32::from_bits(index), 0.0, 0.0),
+            ..Default::default()
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Analytic {
+    Sphere { c: Vec3, r: f32 },
+    Disk(DiskFrame),
+}
+
+impl Analytic {
+    fn aabb(&self) -> Aabb {
+        match self {
+            Analytic::Sphere { c, r } => Aabb::new((*c - *r).into(), (*c + *r).into()),
+            Analytic::Disk(f) => {
+                let ext = (f.a0 * f.a0 + f.a1 * f.a1).powf(0.5);
+                Aabb::new((f.c - ext).into(), (f.c + ext).into())
+            }
+        }
+    }
+    #[inline]
+    fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> f32 {
+        match self {
+            Analytic::Sphere { c, r } => Sphere::intersect_f32(*c, *r, o, d, tmin, tmax),
+            Analytic::Disk(f) => Disk::intersect_f32(f, o, d, tmin, tmax),
+        }
+    }
+}
+
+/// Closest-hit and any-hit ray queries over all shapes of a scene.
+#[derive(Clone, Default)]
+pub struct Accel {
+    bvh2: Bvh2,
+    bvh: CwBvh,
+    /// Traversal data, in BVH primitive order.
+    tris: Vec<PackedTri>,
+    /// (shape, primitive) in BVH primitive order.
+    refs: Vec<[u32; 2]>,
+    /// (shape, primitive) in build order.
+    prims: Vec<[u32; 2]>,
+    analytic: Vec<Analytic>,
+    /// Shape index → index in `analytic` (u32::MAX for meshes).
+    analytic_of_shape: Vec<u32>,
+}
+
+impl std::fmt::Debug for Accel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Accel")
+            .field("primitives", &self.prims.len())
+            .field("nodes", &self.bvh.nodes.len())
+            .finish()
+    }
+}
+
+fn collect_prims(shapes: &[Shape]) -> Vec<[u32; 2]> {
+    let mut prims = Vec::with_capacity(shapes.iter().map(|s| s.prim_count()).sum());
+    for (s, shape) in shapes.iter().enumerate() {
+        for p in 0..shape.prim_count() {
+            prims.push([s as u32, p as u32]);
+        }
+    }
+    prims
+}
+
+impl Accel {
+    /// Builds the acceleration structure over all primitives of `shapes`
+    /// (positions read from `store`).
+    pub fn build(shapes: &[Shape], store: &ParamStore) -> Accel {
+        let mut a = Accel {
+            prims: collect_prims(shapes),
+            ..Default::default()
+        };
+        a.refresh_analytic(shapes, store);
+        let aabbs = a.aabbs(shapes, store);
+        if aabbs.is_empty() {
+            return a;
+        }
+        let p = BvhBuildParams::medium_build();
+        let mut bvh2 = PlocBuilder::with_capacity(aabbs.len()).build(
+            p.ploc_search_distance,
+            &aabbs,
+            (0..aabbs.len() as u32).collect(),
+            p.sort_precision,
+            p.search_depth_threshold,
+        );
+        ReinsertionOptimizer::default().run(&mut bvh2, p.reinsertion_batch_ratio, None);
+        a.bvh2 = bvh2;
+        a.finish(shapes, store);
+        a
+    }
+
+    /// Updates the structure after geometry parameters changed: refits the
+    /// boxes of the existing tree (rebuilds only if the primitive set
+    /// changed).
+    pub fn update(&mut self, shapes: &[Shape], store: &ParamStore) {
+        if collect_prims(shapes) != self.prims || self.bvh2.nodes.is_empty() {
+            *self = Accel::build(shapes, store);
+            return;
+        }
+        self.refresh_analytic(shapes, store);
+        let aabbs = self.aabbs(shapes, store);
+        let idx = &self.bvh2.primitive_indices;
+        for node in self.bvh2.nodes.iter_mut() {
+            if node.is_leaf() {
+                let first = node.first_index as usize;
+                let mut b = Aabb::empty();
+                for &i in &idx[first..first + node.prim_count as usize] {
+                    b = b.union(&aabbs[i as usize]);
+                }
+                node.set_aabb(b);
+            }
+        }
+        self.bvh2.refit_all();
+        self.finish(shapes, store);
+    }
+
+    fn refresh_analytic(&mut self, shapes: &[Shape], store: &ParamStore) {
+        self.analytic.clear();
+        self.analytic_of_shape.clear();
+        for s in shapes {
+            let a = match s {
+                Shape::Mesh(_) => None,
+                Shape::Sphere(sp) => {
+                    let (c, r) = sp.center_radius(store);
+                    Some(Analytic::Sphere { c, r })
+                }
+                Shape::Disk(d) => Some(Analytic::Disk(d.frame(store))),
+            };
+            match a {
+                Some(a) => {
+                    self.analytic_of_shape.push(self.analytic.len() as u32);
+                    self.analytic.push(a);
+                }
+                None => self.analytic_of_shape.push(u32::MAX),
+            }
+        }
+    }
+
+    fn aabbs(&self, shapes: &[Shape], store: &ParamStore) -> Vec<Aabb> {
+        self.prims
+            .iter()
+            .map(|&[s, p]| match &shapes[s as usize] {
+                Shape::Mesh(m) => {
+                    let [p0, p1, p2] = m.triangle(store, p as usize);
+                    Aabb::new(p0.min(p1).min(p2).into(), p0.max(p1).max(p2).into())
+                }
+                _ => self.analytic[self.analytic_of_shape[s as usize] as usize].aabb(),
+            })
+            .collect()
+    }
+
+    /// Derives the wide BVH from the binary one and packs the primitives
+    /// in its order.
+    fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
+        self.bvh = bvh2_to_cwbvh(&self.bvh2, 3, true, false);
+        self.refs = self
+            .bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| self.prims[i as usize])
+            .collect();
+        self.tris = self
+            .refs
+            .iter()
+            .map(|&[s, p]| match &shapes[s as usize] {
+                Shape::Mesh(m) => {
+                    let [p0, p1, p2] = m.triangle(store, p as usize);
+                    PackedTri::new(p0, p1, p2)
+                }
+                _ => PackedTri::analytic(self.analytic_of_shape[s as usize]),
+            })
+            .collect();
+    }
+
+    /// Number of primitives (triangles and analytic shapes).
+    pub fn prim_count(&self) -> usize {
+        self.prims.len()
+    }
+
+    #[inline(always)]
+    fn bvh_ray(ray: &Ray) -> obvhs::ray::Ray {
+        obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax)
+    }
+
+    /// The closest hit on the open interval `(ray.tmin, ray.tmax)`.
+    /// For triangles, `Hit::uv` holds the barycentrics `(b1, b2)` of
+    /// `p = (1 - b1 - b2) p0 + b1 p1 + b2 p2`.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        if self.bvh.nodes.is_empty() {
+            return None;
+        }
+        let mut bray = Self::bvh_ray(ray);
+        let o = bray.origin;
+        let d = bray.direction;
+        let mut best = u32::MAX;
+        let (mut bu, mut bv) = (0.0f32, 0.0f32);
+        let tris = &self.tris[..];
+        let mut state = self.bvh.new_traversal(d);
+        let mut node;
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            node.intersect_ray(&bray, state.oct_inv4),
+            {
+                let id = state.primitive_id as usize;
+                let tri = &tris[id];
+                let c = tri.v0 - o;
+                let den = tri.ng.dot(d);
+                if den != 0.0 {
+                    let r = d.cross(c);
+                    let inv = 1.0 / den;
+                    let u = r.dot(tri.e2) * inv;
+                    let v = r.dot(tri.e1) * inv;
+                    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 {
+                        let t = tri.ng.dot(c) * inv;
+                        if t > bray.tmin && t < bray.tmax {
+                            bray.tmax = t;
+                            best = id as u32;
+                            bu = u;
+                            bv = v;
+                        }
+                    }
+                } else if tri.ng == Vec3A::ZERO {
+                    let a = &self.analytic[tri.v0.x.to_bits() as usize];
+                    let t = a.intersect(ray.o, ray.d, bray.tmin, bray.tmax);
+                    if t < bray.tmax {
+                        bray.tmax = t;
+                        best = id as u32;
+                        bu = 0.0;
+                        bv = 0.0;
+                    }
+                }
+            }
+        );
+        if best == u32::MAX {
+            return None;
+        }
+        let [shape, prim] = self.refs[best as usize];
+        Some(Hit {
+            t: bray.tmax,
+            shape,
+            prim,
+            uv: Vec2::new(bu, bv),
+        })
+    }
+
+    /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
+    /// rays): stops at the first hit found.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        if self.bvh.nodes.is_empty() {
+            return false;
+        }
+        let bray = Self::bvh_ray(ray);
+        let o = bray.origin;
+        let d = bray.direction;
+        let tris = &self.tris[..];
+        let mut state = self.bvh.new_traversal(d);
+        let mut node;
+        let mut hit = false;
+        'outer: {
+            obvhs::traverse!(
+                self.bvh,
+                node,
+                state,
+                node.intersect_ray(&bray, state.oct_inv4),
+                {
+                    let tri = &tris[state.primitive_id as usize];
+                    let c = tri.v0 - o;
+                    let den = tri.ng.dot(d);
+                    if den != 0.0 {
+                        let r = d.cross(c);
+                        let inv = 1.0 / den;
+                        let u = r.dot(tri.e2) * inv;
+                        let v = r.dot(tri.e1) * inv;
+                        if u >= 0.0 && v >= 0.0 && u + v <= 1.0 {
+                            let t = tri.ng.dot(c) * inv;
+                            if t > bray.tmin && t < bray.tmax {
+                                hit = true;
+                                break 'outer;
+                            }
+                        }
+                    } else if tri.ng == Vec3A::ZERO {
+                        let a = &self.analytic[tri.v0.x.to_bits() as usize];
+                        if a.intersect(ray.o, ray.d, bray.tmin, bray.tmax) < bray.tmax {
+                            hit = true;
+                            break 'outer;
+                        }
+                    }
+                }
+            );
+        }
+        hit
+    }
+}
