@@ -234,9 +234,14 @@ impl Accel {
         self.prims.len()
     }
 
+    /// The traversal ray. Negative zeros in the direction are made
+    /// positive (`-0.0 + 0.0 = +0.0`): obvhs picks slab sides with `d < 0`
+    /// but inverts `-0.0` to a negative number, which would make
+    /// axis-aligned rays miss.
     #[inline(always)]
     fn bvh_ray(ray: &Ray) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax)
+        let d = Vec3A::from(ray.d) + Vec3A::ZERO;
+        obvhs::ray::Ray::new(ray.o.into(), d, ray.tmin, ray.tmax)
     }
 
     /// The closest hit on the open interval `(ray.tmin, ray.tmax)`.
@@ -348,5 +353,269 @@ impl Accel {
             );
         }
         hit
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::mesh::{Mesh, MeshData, MeshOptions};
+    use crate::geometry::ShapeT;
+    use crate::math::Transform;
+    use glam::Mat3;
+
+    struct Rng(u64);
+    impl Rng {
+        fn f(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn dir(&mut self) -> Vec3 {
+            crate::math::warp::square_to_uniform_sphere(Vec2::new(self.f(), self.f()))
+        }
+    }
+
+    /// A bumpy grid mesh of 2·n² triangles over [-1,1]², with a bump.
+    fn grid(n: usize, key: &str, z: f32, store: &mut ParamStore) -> Shape {
+        let mut d = MeshData::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (
+                    -1.0 + 2.0 * i as f32 / n as f32,
+                    -1.0 + 2.0 * j as f32 / n as f32,
+                );
+                d.positions
+                    .push(Vec3::new(x, y, z + 0.3 * (3.0 * x).sin() * (2.0 * y).cos()));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                d.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                d.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        Shape::Mesh(
+            Mesh::new(
+                "ply",
+                key,
+                key,
+                d,
+                &Transform::IDENTITY,
+                MeshOptions::default(),
+                store,
+            )
+            .unwrap(),
+        )
+    }
+
+    /// Reference closest hit: every primitive, no BVH.
+    fn brute(shapes: &[Shape], store: &ParamStore, ray: &Ray) -> Option<(f32, u32, u32)> {
+        let mut best: Option<(f32, u32, u32)> = None;
+        let mut tmax = ray.tmax;
+        for (s, shape) in shapes.iter().enumerate() {
+            for p in 0..shape.prim_count() {
+                let t = match shape {
+                    Shape::Mesh(m) => {
+                        let [p0, p1, p2] = m.triangle(store, p);
+                        // independent formulation (Möller–Trumbore, f64)
+                        let (o, d) = (ray.o.as_dvec3(), ray.d.as_dvec3());
+                        let (a, b, c) = (p0.as_dvec3(), p1.as_dvec3(), p2.as_dvec3());
+                        let (e1, e2) = (b - a, c - a);
+                        let pv = d.cross(e2);
+                        let det = e1.dot(pv);
+                        if det.abs() < 1e-14 {
+                            continue;
+                        }
+                        let tv = o - a;
+                        let u = tv.dot(pv) / det;
+                        let q = tv.cross(e1);
+                        let v = d.dot(q) / det;
+                        if u < 0.0 || v < 0.0 || u + v > 1.0 {
+                            continue;
+                        }
+                        (e2.dot(q) / det) as f32
+                    }
+                    Shape::Sphere(sp) => {
+                        let (c, r) = sp.center_radius(store);
+                        Sphere::intersect_f32(c, r, ray.o, ray.d, ray.tmin, tmax)
+                    }
+                    Shape::Disk(d) => {
+                        Disk::intersect_f32(&d.frame(store), ray.o, ray.d, ray.tmin, tmax)
+                    }
+                };
+                if t > ray.tmin && t < tmax {
+                    tmax = t;
+                    best = Some((t, s as u32, p as u32));
+                }
+            }
+        }
+        best
+    }
+
+    fn check_against_brute(
+        shapes: &[Shape],
+        store: &ParamStore,
+        accel: &Accel,
+        seed: u64,
+        n: usize,
+    ) {
+        let mut rng = Rng(seed);
+        let mut hits = 0;
+        for i in 0..n {
+            let o = Vec3::new(rng.f() - 0.5, rng.f() - 0.5, rng.f() - 0.5) * 6.0;
+            let target = Vec3::new(rng.f() - 0.5, rng.f() - 0.5, rng.f() - 0.5) * 2.0;
+            let mut ray = Ray::new(o, (target - o).normalize());
+            if i % 5 == 0 {
+                ray.d = rng.dir();
+            }
+            if i % 7 == 0 {
+                ray.tmax = 2.0 + rng.f() * 3.0;
+            }
+            if i % 11 == 0 {
+                // axis-aligned, with negative zeros (-Vec3::X = (-1, -0, -0))
+                let axes = [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z];
+                ray.d = axes[(i / 11) % 6];
+                ray.o = target - ray.d * 4.0;
+            }
+            let want = brute(shapes, store, &ray);
+            let got = accel.intersect(&ray);
+            assert_eq!(accel.occluded(&ray), want.is_some(), "ray {i}: {ray:?}");
+            match (want, got) {
+                (None, None) => {}
+                (Some((t, s, p)), Some(h)) => {
+                    hits += 1;
+                    assert!(
+                        (h.t - t).abs() <= 1e-4 * (1.0 + t),
+                        "ray {i}: t {} vs {t}",
+                        h.t
+                    );
+                    // the same primitive, unless two are hit at the same t
+                    if (h.shape, h.prim) != (s, p) {
+                        assert!(
+                            (h.t - t).abs() < 1e-5,
+                            "ray {i}: ({},{}) vs ({s},{p})",
+                            h.shape,
+                            h.prim
+                        );
+                    }
+                    // barycentrics reproduce the hit point
+                    let si = shapes[h.shape as usize].surface_interaction::<f32>(store, &ray, &h);
+                    assert!((si.p.val() - ray.at(h.t)).length() < 1e-3, "ray {i}");
+                    assert!((si.t - h.t).abs() < 1e-3 * (1.0 + h.t), "ray {i}");
+                    if let Shape::Mesh(m) = &shapes[h.shape as usize] {
+                        let [p0, p1, p2] = m.triangle(store, h.prim as usize);
+                        let p = p0 * (1.0 - h.uv.x - h.uv.y) + p1 * h.uv.x + p2 * h.uv.y;
+                        assert!((p - ray.at(h.t)).length() < 1e-4, "ray {i}");
+                    }
+                }
+                (w, g) => {
+                    // allow misses/hits only for grazing rays at an edge
+                    panic!("ray {i}: brute {w:?} vs bvh {g:?} ({ray:?})");
+                }
+            }
+        }
+        assert!(hits > n / 5, "too few hits ({hits}) for a meaningful test");
+    }
+
+    #[test]
+    fn closest_hit_equals_brute_force_on_a_mesh() {
+        let mut store = ParamStore::new();
+        let shapes = vec![grid(24, "g", 0.0, &mut store)];
+        let accel = Accel::build(&shapes, &store);
+        assert_eq!(accel.prim_count(), 2 * 24 * 24);
+        check_against_brute(&shapes, &store, &accel, 7, 3000);
+    }
+
+    #[test]
+    fn closest_hit_equals_brute_force_on_a_mixed_scene() {
+        let mut store = ParamStore::new();
+        let rot = Mat3::from_rotation_x(0.4);
+        let mut shapes = vec![grid(10, "g", -0.5, &mut store)];
+        for (k, (c, r)) in [
+            (Vec3::new(0.3, 0.2, 0.4), 0.5),
+            (Vec3::new(-0.6, -0.4, 0.1), 0.3),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            shapes.push(Shape::Sphere(
+                Sphere::new(&format!("s{k}"), c, r, rot, false, &mut store).unwrap(),
+            ));
+        }
+        let t = Transform::translate(Vec3::new(0.0, 0.5, 0.8))
+            .after(&Transform::rotate(Vec3::new(1.0, 0.3, 0.0), 50.0))
+            .after(&Transform::new(glam::Mat4::from_scale(Vec3::new(0.8, 0.5, 1.0))).unwrap());
+        shapes.push(Shape::Disk(Disk::new("d", &t, false, &mut store).unwrap()));
+        shapes.push(grid(6, "g2", 0.9, &mut store));
+        let accel = Accel::build(&shapes, &store);
+        check_against_brute(&shapes, &store, &accel, 11, 3000);
+    }
+
+    #[test]
+    fn update_refits_after_moving_vertices() {
+        let mut store = ParamStore::new();
+        let mut shapes = vec![grid(12, "g", 0.0, &mut store)];
+        shapes.push(Shape::Sphere(
+            Sphere::new(
+                "s",
+                Vec3::new(0.0, 0.0, 1.0),
+                0.3,
+                Mat3::IDENTITY,
+                false,
+                &mut store,
+            )
+            .unwrap(),
+        ));
+        let mut accel = Accel::build(&shapes, &store);
+        let mut p = store.data(store.id("g.vertex_positions").unwrap()).to_vec();
+        for (i, v) in p.iter_mut().enumerate() {
+            if i % 3 == 2 {
+                *v += 0.7;
+            } else {
+                *v *= 1.3;
+            }
+        }
+        store.set("g.vertex_positions", &p).unwrap();
+        store.set("s.center", &[0.5, -0.2, -0.6]).unwrap();
+        let changed = store.take_dirty();
+        for s in shapes.iter_mut() {
+            s.parameters_changed(&mut store, &changed).unwrap();
+        }
+        accel.update(&shapes, &store);
+        check_against_brute(&shapes, &store, &accel, 3, 2000);
+    }
+
+    #[test]
+    fn empty_and_single_primitive() {
+        let store = ParamStore::new();
+        let a = Accel::build(&[], &store);
+        let r = Ray::new(Vec3::ZERO, Vec3::Z);
+        assert!(a.intersect(&r).is_none() && !a.occluded(&r));
+        let mut store = ParamStore::new();
+        let shapes = vec![Shape::Sphere(
+            Sphere::new(
+                "s",
+                Vec3::new(0.0, 0.0, 3.0),
+                1.0,
+                Mat3::IDENTITY,
+                false,
+                &mut store,
+            )
+            .unwrap(),
+        )];
+        let a = Accel::build(&shapes, &store);
+        let h = a.intersect(&r).unwrap();
+        assert!((h.t - 2.0).abs() < 1e-6);
+        // from inside: the far side
+        let h = a
+            .intersect(&Ray::new(Vec3::new(0.0, 0.0, 3.0), Vec3::Z))
+            .unwrap();
+        assert!((h.t - 1.0).abs() < 1e-6);
+        let mut short = r;
+        short.tmax = 1.9;
+        assert!(a.intersect(&short).is_none() && !a.occluded(&short));
     }
 }
