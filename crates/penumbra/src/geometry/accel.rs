@@ -270,17 +270,22 @@ impl Accel {
                 let c = tri.v0 - o;
                 let den = tri.ng.dot(d);
                 if den != 0.0 {
+                    // sign-normalised edge tests before any division
+                    // (as Embree's Möller–Trumbore intersector)
+                    let sgn = den.to_bits() & 0x8000_0000;
+                    let flip = |x: f32| f32::from_bits(x.to_bits() ^ sgn);
+                    let aden = den.abs();
                     let r = d.cross(c);
-                    let inv = 1.0 / den;
-                    let u = r.dot(tri.e2) * inv;
-                    let v = r.dot(tri.e1) * inv;
-                    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 {
-                        let t = tri.ng.dot(c) * inv;
-                        if t > bray.tmin && t < bray.tmax {
-                            bray.tmax = t;
+                    let u = flip(r.dot(tri.e2));
+                    let v = flip(r.dot(tri.e1));
+                    if u >= 0.0 && v >= 0.0 && u + v <= aden {
+                        let tn = flip(tri.ng.dot(c));
+                        if tn > bray.tmin * aden && tn < bray.tmax * aden {
+                            let inv = 1.0 / aden;
+                            bray.tmax = tn * inv;
                             best = id as u32;
-                            bu = u;
-                            bv = v;
+                            bu = u * inv;
+                            bv = v * inv;
                         }
                     }
                 } else if tri.ng == Vec3A::ZERO {
@@ -331,13 +336,15 @@ impl Accel {
                     let c = tri.v0 - o;
                     let den = tri.ng.dot(d);
                     if den != 0.0 {
+                        let sgn = den.to_bits() & 0x8000_0000;
+                        let flip = |x: f32| f32::from_bits(x.to_bits() ^ sgn);
+                        let aden = den.abs();
                         let r = d.cross(c);
-                        let inv = 1.0 / den;
-                        let u = r.dot(tri.e2) * inv;
-                        let v = r.dot(tri.e1) * inv;
-                        if u >= 0.0 && v >= 0.0 && u + v <= 1.0 {
-                            let t = tri.ng.dot(c) * inv;
-                            if t > bray.tmin && t < bray.tmax {
+                        let u = flip(r.dot(tri.e2));
+                        let v = flip(r.dot(tri.e1));
+                        if u >= 0.0 && v >= 0.0 && u + v <= aden {
+                            let tn = flip(tri.ng.dot(c));
+                            if tn > bray.tmin * aden && tn < bray.tmax * aden {
                                 hit = true;
                                 break 'outer;
                             }

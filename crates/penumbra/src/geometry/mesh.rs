@@ -142,7 +142,7 @@ impl Mesh {
             );
             let (e1, e2) = (p1 - p0, p2 - p0);
             let cr = e1.cross(e2).length();
-            if !(cr > 1e-12 * e1.length() * e2.length()) || cr == 0.0 {
+            if cr.is_nan() || cr <= 1e-12 * e1.length() * e2.length() || cr == 0.0 {
                 return Err(err(format!(
                     "face {f} (vertices {a}, {b}, {c}) is degenerate (zero area); remove it from the mesh"
                 )));

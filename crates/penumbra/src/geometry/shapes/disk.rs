@@ -88,7 +88,7 @@ impl Disk {
         let nn = f.a0.cross(f.a1);
         self.area = PI * nn.length();
         self.mirror = nn.dot(a2) < 0.0;
-        if !(self.area > 0.0) {
+        if self.area.is_nan() || self.area <= 0.0 {
             return Err(crate::error::Error::Param {
                 key: store.get(self.to_world).key.clone(),
                 msg: "the disk's to_world maps it to zero area".into(),

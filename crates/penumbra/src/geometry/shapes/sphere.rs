@@ -49,7 +49,7 @@ impl Sphere {
             && cols[0].dot(cols[1]).abs() <= 1e-4 * r * r
             && cols[0].dot(cols[2]).abs() <= 1e-4 * r * r
             && cols[1].dot(cols[2]).abs() <= 1e-4 * r * r;
-        if !similar || !(r > 0.0) || !c.is_finite() {
+        if !similar || r.is_nan() || r <= 0.0 || !c.is_finite() {
             return Err(node.error(
                 "to_world must be a similarity (rotation, uniform scale, translation) for a sphere; use a mesh for ellipsoids",
             ));
