@@ -24,6 +24,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+use obvhs::cwbvh::node::{extract_byte64, CwBvhNode};
 use obvhs::cwbvh::CwBvh;
 use obvhs::ploc::PlocBuilder;
 use obvhs::BvhBuildParams;
@@ -84,6 +85,89 @@ impl Analytic {
     }
 }
 
+/// Which of the (up to) eight children of a CWBVH node the ray overlaps
+/// on `[ray.tmin, ray.tmax]`, as the hit mask the `obvhs::traverse!` loop
+/// expects (child-node bits in the high byte, leaf-primitive bits below).
+///
+/// Same semantics as obvhs' `CwBvhNode::intersect_ray`, but the eight
+/// quantised child planes per axis are widened from bytes to floats with
+/// SSE2 unpacks instead of scalar conversions, near/far planes are chosen
+/// once per axis, and the ray's own `tmin` is honoured.
+#[inline(always)]
+fn intersect_node(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_inv4: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        let e = node.compute_extent();
+        let inv = e * ray.inv_direction;
+        let org = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+        let d = ray.direction;
+        let pick = |neg: bool, lo: &[u8; 8], hi: &[u8; 8]| -> ([u8; 8], [u8; 8]) {
+            if neg {
+                (*hi, *lo)
+            } else {
+                (*lo, *hi)
+            }
+        };
+        let (xn, xf) = pick(d.x < 0.0, &node.child_min_x, &node.child_max_x);
+        let (yn, yf) = pick(d.y < 0.0, &node.child_min_y, &node.child_max_y);
+        let (zn, zf) = pick(d.z < 0.0, &node.child_min_z, &node.child_max_z);
+        // SAFETY: SSE2 is part of the x86_64 baseline; the loads read 8
+        // bytes from 8-byte arrays.
+        let mask = unsafe {
+            #[inline(always)]
+            unsafe fn widen(v: &[u8; 8]) -> (__m128, __m128) {
+                let z = _mm_setzero_si128();
+                let b = _mm_loadl_epi64(v.as_ptr() as *const __m128i);
+                let w = _mm_unpacklo_epi8(b, z);
+                (
+                    _mm_cvtepi32_ps(_mm_unpacklo_epi16(w, z)),
+                    _mm_cvtepi32_ps(_mm_unpackhi_epi16(w, z)),
+                )
+            }
+            let (ix, iy, iz) = (_mm_set1_ps(inv.x), _mm_set1_ps(inv.y), _mm_set1_ps(inv.z));
+            let (ox, oy, oz) = (_mm_set1_ps(org.x), _mm_set1_ps(org.y), _mm_set1_ps(org.z));
+            let slab = |q: __m128, i: __m128, o: __m128| _mm_add_ps(_mm_mul_ps(q, i), o);
+            let (xn0, xn1) = widen(&xn);
+            let (xf0, xf1) = widen(&xf);
+            let (yn0, yn1) = widen(&yn);
+            let (yf0, yf1) = widen(&yf);
+            let (zn0, zn1) = widen(&zn);
+            let (zf0, zf1) = widen(&zf);
+            let tmin_r = _mm_set1_ps(ray.tmin);
+            let tmax_r = _mm_set1_ps(ray.tmax);
+            let near = |x: __m128, y: __m128, z: __m128| {
+                _mm_max_ps(
+                    _mm_max_ps(slab(x, ix, ox), slab(y, iy, oy)),
+                    _mm_max_ps(slab(z, iz, oz), tmin_r),
+                )
+            };
+            let far = |x: __m128, y: __m128, z: __m128| {
+                _mm_min_ps(
+                    _mm_min_ps(slab(x, ix, ox), slab(y, iy, oy)),
+                    _mm_min_ps(slab(z, iz, oz), tmax_r),
+                )
+            };
+            let m0 = _mm_movemask_ps(_mm_cmple_ps(near(xn0, yn0, zn0), far(xf0, yf0, zf0)));
+            let m1 = _mm_movemask_ps(_mm_cmple_ps(near(xn1, yn1, zn1), far(xf1, yf1, zf1)));
+            (m0 | (m1 << 4)) as u32
+        };
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+        let mut hit_mask = 0u32;
+        let mut m = mask;
+        while m != 0 {
+            let j = m.trailing_zeros() as usize;
+            m &= m - 1;
+            hit_mask |= extract_byte64(child_bits8, j) << extract_byte64(bit_index8, j);
+        }
+        hit_mask
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        node.intersect_ray(ray, oct_inv4)
+    }
+}
+
 /// Closest-hit and any-hit ray queries over all shapes of a scene.
 #[derive(Clone, Default)]
 pub struct Accel {
@@ -132,7 +216,10 @@ impl Accel {
         if aabbs.is_empty() {
             return a;
         }
-        let p = BvhBuildParams::medium_build();
+        // obvhs' "slow" preset without spatial splits (which need
+        // triangles and would break refitting): ~15% faster traversal than
+        // "medium" on the 327k-triangle reference mesh, ~0.35 s build.
+        let p = BvhBuildParams::slow_build();
         let mut bvh2 = PlocBuilder::with_capacity(aabbs.len()).build(
             p.ploc_search_distance,
             &aabbs,
@@ -263,7 +350,7 @@ impl Accel {
             self.bvh,
             node,
             state,
-            node.intersect_ray(&bray, state.oct_inv4),
+            intersect_node(node, &bray, state.oct_inv4),
             {
                 let id = state.primitive_id as usize;
                 let tri = &tris[id];
@@ -330,7 +417,7 @@ impl Accel {
                 self.bvh,
                 node,
                 state,
-                node.intersect_ray(&bray, state.oct_inv4),
+                intersect_node(node, &bray, state.oct_inv4),
                 {
                     let tri = &tris[state.primitive_id as usize];
                     let c = tri.v0 - o;
