@@ -6,7 +6,13 @@
 
 pub mod accel;
 mod interaction;
+pub mod mesh;
+pub mod obj;
+pub mod ply;
 pub mod shape;
+pub mod shapes;
 
+pub use accel::Accel;
 pub use interaction::{Hit, PositionSample, Ray, SurfaceInteraction};
-pub use shape::{Shape, ShapeT};
+pub use mesh::{Mesh, MeshData, MeshOptions};
+pub use shape::{Shape, ShapeT, SHAPE_PLUGINS};

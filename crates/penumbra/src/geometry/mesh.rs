@@ -1,0 +1,799 @@
+//! Triangle meshes whose vertex data lives in the [`ParamStore`], so that
+//! vertex positions (and normals, texture coordinates) are differentiable.
+//!
+//! Parameters (Mitsuba's `traverse()` names):
+//! - `<key>.vertex_positions`: `[n, 3]`, world space (`to_world` applied at
+//!   load), flags [`ParamFlags::GEOMETRY`], domain [`Domain::Finite`];
+//! - `<key>.vertex_normals`: `[n, 3]`, world space, unit length, if the
+//!   file has normals or they were computed (not with `face_normals`);
+//! - `<key>.vertex_texcoords`: `[n, 2]`, if the file has uvs.
+//!
+//! Faces (topology) are not parameters: they stay in the mesh.
+
+use crate::ad::Real;
+use crate::error::{Error, Result};
+use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
+use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use glam::{Vec2, Vec3};
+
+/// Mesh data as read from a file (object space), before validation.
+#[derive(Clone, Debug, Default)]
+pub struct MeshData {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub texcoords: Option<Vec<Vec2>>,
+    pub faces: Vec<[u32; 3]>,
+}
+
+/// Options of the mesh plugins (`ply`, `obj`, `rectangle`, `cube`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeshOptions {
+    /// Flat shading: no vertex normals, the shading normal is the geometric one.
+    pub face_normals: bool,
+    /// Inverts geometric and shading normals.
+    pub flip_normals: bool,
+}
+
+/// A triangle mesh (see the module documentation for its parameters).
+#[derive(Clone, Debug)]
+pub struct Mesh {
+    /// Plugin name (`ply`, `obj`, `rectangle`, `cube`).
+    pub plugin: &'static str,
+    /// Parameter-key prefix (the shape's id).
+    pub key: String,
+    /// Where the data came from (file path or plugin), for messages.
+    pub source: String,
+    pub faces: Vec<[u32; 3]>,
+    pub positions: ParamId,
+    pub normals: Option<ParamId>,
+    pub texcoords: Option<ParamId>,
+    pub face_normals: bool,
+    pub flip_normals: bool,
+    /// Triangle selection by area for [`ShapeT::sample_position`].
+    area_distr: DiscreteDistribution,
+    area: f32,
+}
+
+impl Mesh {
+    /// Validates `data`, applies `to_world` (positions; normals by the
+    /// inverse transpose), computes smooth vertex normals when the data has
+    /// none and `face_normals` is off, and registers the vertex buffers in
+    /// `store` under `key`.
+    ///
+    /// Errors (naming `source` and the face or vertex): empty mesh,
+    /// non-finite values, face index out of range, degenerate (zero-area)
+    /// triangle, non-manifold edge (shared by more than two faces).
+    pub fn new(
+        plugin: &'static str,
+        key: &str,
+        source: &str,
+        mut data: MeshData,
+        to_world: &Transform,
+        opts: MeshOptions,
+        store: &mut ParamStore,
+    ) -> Result<Mesh> {
+        let err = |msg: String| Error::Invalid(format!("{source}: {msg}"));
+        if data.positions.is_empty() || data.faces.is_empty() {
+            return Err(err(format!(
+                "empty mesh ({} vertices, {} faces); a shape needs at least one triangle",
+                data.positions.len(),
+                data.faces.len()
+            )));
+        }
+        for (i, p) in data.positions.iter().enumerate() {
+            if !p.is_finite() {
+                return Err(err(format!("vertex {i} has a non-finite position {p}")));
+            }
+        }
+        if let Some(ns) = &data.normals {
+            if ns.len() != data.positions.len() {
+                return Err(err(format!(
+                    "{} normals for {} vertices",
+                    ns.len(),
+                    data.positions.len()
+                )));
+            }
+            if let Some(i) = ns.iter().position(|n| !n.is_finite()) {
+                return Err(err(format!("vertex {i} has a non-finite normal {}", ns[i])));
+            }
+        }
+        if let Some(uv) = &data.texcoords {
+            if uv.len() != data.positions.len() {
+                return Err(err(format!(
+                    "{} texture coordinates for {} vertices",
+                    uv.len(),
+                    data.positions.len()
+                )));
+            }
+            if let Some(i) = uv.iter().position(|t| !t.is_finite()) {
+                return Err(err(format!(
+                    "vertex {i} has non-finite texture coordinates {}",
+                    uv[i]
+                )));
+            }
+        }
+        let nv = data.positions.len();
+        for (f, face) in data.faces.iter().enumerate() {
+            if let Some(&bad) = face.iter().find(|&&i| i as usize >= nv) {
+                return Err(err(format!(
+                    "face {f} refers to vertex {bad}, but the mesh has {nv} vertices"
+                )));
+            }
+        }
+        // to world space
+        for p in data.positions.iter_mut() {
+            *p = to_world.point(*p);
+            if !p.is_finite() {
+                return Err(err("to_world maps a vertex to a non-finite position".into()));
+            }
+        }
+        if let Some(ns) = data.normals.as_mut() {
+            for n in ns.iter_mut() {
+                *n = to_world.normal(*n).normalize_or_zero();
+            }
+        }
+        // degenerate triangles
+        for (f, &[a, b, c]) in data.faces.iter().enumerate() {
+            let (p0, p1, p2) = (
+                data.positions[a as usize].as_dvec3(),
+                data.positions[b as usize].as_dvec3(),
+                data.positions[c as usize].as_dvec3(),
+            );
+            let (e1, e2) = (p1 - p0, p2 - p0);
+            let cr = e1.cross(e2).length();
+            if cr.is_nan() || cr <= 1e-12 * e1.length() * e2.length() || cr == 0.0 {
+                return Err(err(format!(
+                    "face {f} (vertices {a}, {b}, {c}) is degenerate (zero area); remove it from the mesh"
+                )));
+            }
+        }
+        check_manifold(&data.faces).map_err(err)?;
+
+        let opts_normals = if opts.face_normals {
+            None
+        } else {
+            Some(match data.normals.take() {
+                Some(n) => n,
+                None => vertex_normals(&data.positions, &data.faces),
+            })
+        };
+
+        let flat3 = |v: &[Vec3]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
+        let positions = store.add(
+            format!("{key}.vertex_positions"),
+            flat3(&data.positions),
+            vec![nv, 3],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )?;
+        let normals = match opts_normals {
+            Some(n) => Some(store.add(
+                format!("{key}.vertex_normals"),
+                flat3(&n),
+                vec![nv, 3],
+                ParamFlags::DIFFERENTIABLE,
+                Domain::Finite,
+            )?),
+            None => None,
+        };
+        let texcoords = match &data.texcoords {
+            Some(uv) => Some(store.add(
+                format!("{key}.vertex_texcoords"),
+                uv.iter().flat_map(|t| t.to_array()).collect(),
+                vec![nv, 2],
+                ParamFlags::DIFFERENTIABLE,
+                Domain::Finite,
+            )?),
+            None => None,
+        };
+        let mut mesh = Mesh {
+            plugin,
+            key: key.to_string(),
+            source: source.to_string(),
+            faces: data.faces,
+            positions,
+            normals,
+            texcoords,
+            face_normals: opts.face_normals,
+            flip_normals: opts.flip_normals,
+            area_distr: DiscreteDistribution::default(),
+            area: 0.0,
+        };
+        mesh.update_areas(store)?;
+        Ok(mesh)
+    }
+
+    /// Number of triangles.
+    pub fn face_count(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self, store: &ParamStore) -> usize {
+        store.data(self.positions).len() / 3
+    }
+
+    /// World-space vertex `i` (f32).
+    #[inline(always)]
+    pub fn vertex(&self, store: &ParamStore, i: u32) -> Vec3 {
+        let d = store.data(self.positions);
+        let i = 3 * i as usize;
+        Vec3::new(d[i], d[i + 1], d[i + 2])
+    }
+
+    /// The three world-space vertices of triangle `f` (f32).
+    #[inline(always)]
+    pub fn triangle(&self, store: &ParamStore, f: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.faces[f];
+        [
+            self.vertex(store, a),
+            self.vertex(store, b),
+            self.vertex(store, c),
+        ]
+    }
+
+    fn update_areas(&mut self, store: &ParamStore) -> Result<()> {
+        let areas: Vec<f32> = (0..self.faces.len())
+            .map(|f| {
+                let [p0, p1, p2] = self.triangle(store, f);
+                0.5 * (p1 - p0).cross(p2 - p0).length()
+            })
+            .collect();
+        self.area_distr = DiscreteDistribution::new(&areas).ok_or_else(|| {
+            Error::Invalid(format!("{}: the mesh has zero total area", self.source))
+        })?;
+        self.area = self.area_distr.sum() as f32;
+        Ok(())
+    }
+
+    /// Refreshes what depends on the vertex positions after `changed`
+    /// parameters were updated: the area table, and (as Mitsuba does) the
+    /// vertex normals, recomputed from the positions unless the normals were
+    /// updated too.
+    pub fn parameters_changed(
+        &mut self,
+        store: &mut ParamStore,
+        changed: &[ParamId],
+    ) -> Result<()> {
+        if !changed.contains(&self.positions) {
+            return Ok(());
+        }
+        if let Some(nid) = self.normals {
+            if !changed.contains(&nid) {
+                let d = store.data(self.positions);
+                let pos: Vec<Vec3> = d.chunks_exact(3).map(Vec3::from_slice).collect();
+                let n = vertex_normals(&pos, &self.faces);
+                let flat: Vec<f32> = n.iter().flat_map(|v| v.to_array()).collect();
+                let key = store.get(nid).key.clone();
+                // (this marks the normals dirty too; harmless: they are
+                // read through the store at every hit)
+                store.set(&key, &flat)?;
+            }
+        }
+        self.update_areas(store)
+    }
+
+    /// Geometric normal of triangle `f` (unit, flipped if `flip_normals`).
+    pub fn face_normal(&self, store: &ParamStore, f: usize) -> Vec3 {
+        let [p0, p1, p2] = self.triangle(store, f);
+        let n = (p1 - p0).cross(p2 - p0).normalize();
+        if self.flip_normals {
+            -n
+        } else {
+            n
+        }
+    }
+
+    /// Differentiable re-evaluation of a ray hit on triangle `prim`:
+    /// Möller–Trumbore (Möller and Trumbore 1997, "Fast, Minimum Storage
+    /// Ray/Triangle Intersection") in `R` from the vertex positions read
+    /// through the store, so t, p, uv and the normals depend on them.
+    pub fn triangle_interaction<R: Real>(
+        &self,
+        store: &ParamStore,
+        ray: &Ray,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
+        let prim = hit.prim as usize;
+        let [i0, i1, i2] = self.faces[prim];
+        let (i0, i1, i2) = (i0 as usize, i1 as usize, i2 as usize);
+        let p0: V3<R> = store.read3(self.positions, i0);
+        let p1: V3<R> = store.read3(self.positions, i1);
+        let p2: V3<R> = store.read3(self.positions, i2);
+        let o = V3::<R>::cst(ray.o);
+        let d = V3::<R>::cst(ray.d);
+        let e1 = p1 - p0;
+        let e2 = p2 - p0;
+        let pvec = d.cross(e2);
+        let det = e1.dot(pvec);
+        let (t, b1, b2) = if det.val() != 0.0 && det.is_finite() {
+            let inv = det.recip();
+            let tvec = o - p0;
+            let qvec = tvec.cross(e1);
+            (e2.dot(qvec) * inv, tvec.dot(pvec) * inv, d.dot(qvec) * inv)
+        } else {
+            (R::cst(hit.t), R::cst(hit.uv.x), R::cst(hit.uv.y))
+        };
+        let b0 = R::cst(1.0) - b1 - b2;
+        let p = o + d * t;
+
+        let mut n = e1.cross(e2).normalize();
+        let (uv, dpdu) = match self.texcoords {
+            Some(tid) => {
+                let read2 = |i: usize| {
+                    V2::new(store.read::<R>(tid, 2 * i), store.read::<R>(tid, 2 * i + 1))
+                };
+                let (t0, t1, t2) = (read2(i0), read2(i1), read2(i2));
+                let uv = V2::new(
+                    t0.x * b0 + t1.x * b1 + t2.x * b2,
+                    t0.y * b0 + t1.y * b1 + t2.y * b2,
+                );
+                let (du1, du2) = (t1 - t0, t2 - t0);
+                let duv_det = du1.x * du2.y - du1.y * du2.x;
+                let dpdu = if duv_det.val().abs() > 1e-12 {
+                    (e1 * du2.y - e2 * du1.y) / duv_det
+                } else {
+                    e1
+                };
+                (uv, dpdu)
+            }
+            None => (V2::new(b1, b2), e1),
+        };
+        let mut ns = match self.normals {
+            Some(nid) => {
+                let n0: V3<R> = store.read3(nid, i0);
+                let n1: V3<R> = store.read3(nid, i1);
+                let n2: V3<R> = store.read3(nid, i2);
+                let s = n0 * b0 + n1 * b1 + n2 * b2;
+                if s.length_squared().val() > 0.0 {
+                    s.normalize()
+                } else {
+                    n
+                }
+            }
+            None => n,
+        };
+        if self.flip_normals {
+            n = -n;
+            ns = -ns;
+        }
+        let sh_frame = Frame::from_normal_tangent(ns, dpdu);
+        let wi = sh_frame.to_local(-d);
+        SurfaceInteraction {
+            t,
+            p,
+            n,
+            sh_frame,
+            uv,
+            wi,
+            shape: hit.shape,
+            prim: hit.prim,
+        }
+    }
+}
+
+impl ShapeT for Mesh {
+    fn surface_interaction<R: Real>(
+        &self,
+        store: &ParamStore,
+        ray: &Ray,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
+        self.triangle_interaction(store, ray, hit)
+    }
+
+    /// Picks a triangle by area, then a uniform point in it; the density is
+    /// 1 / total area.
+    fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
+        let (f, _, ux) = self.area_distr.sample_reuse(u.x);
+        let b = warp::square_to_uniform_triangle(Vec2::new(ux, u.y));
+        let [p0, p1, p2] = self.triangle(store, f);
+        let b0 = 1.0 - b.x - b.y;
+        let p = p0 * b0 + p1 * b.x + p2 * b.y;
+        let uv = match self.texcoords {
+            Some(tid) => {
+                let t = store.data(tid);
+                let [i0, i1, i2] = self.faces[f];
+                let tc = |i: u32| Vec2::new(t[2 * i as usize], t[2 * i as usize + 1]);
+                tc(i0) * b0 + tc(i1) * b.x + tc(i2) * b.y
+            }
+            None => b,
+        };
+        PositionSample {
+            p,
+            n: self.face_normal(store, f),
+            uv,
+            pdf: 1.0 / self.area,
+            prim: f as u32,
+        }
+    }
+
+    fn surface_area(&self) -> f32 {
+        self.area
+    }
+}
+
+/// Fails if an edge is shared by more than two faces.
+fn check_manifold(faces: &[[u32; 3]]) -> std::result::Result<(), String> {
+    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(faces.len() * 3);
+    for (f, t) in faces.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (a, b) = if a < b { (a, b) } else { (b, a) };
+            edges.push((((a as u64) << 32) | b as u64, f as u32));
+        }
+    }
+    edges.sort_unstable();
+    let mut i = 0;
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j].0 == edges[i].0 {
+            j += 1;
+        }
+        if j - i > 2 {
+            let (a, b) = (edges[i].0 >> 32, edges[i].0 & 0xffff_ffff);
+            let fs: Vec<String> = edges[i..j].iter().map(|e| e.1.to_string()).collect();
+            return Err(format!(
+                "non-manifold edge between vertices {a} and {b}: shared by {} faces ({}); an edge may belong to at most two faces",
+                j - i,
+                fs.join(", ")
+            ));
+        }
+        i = j;
+    }
+    Ok(())
+}
+
+/// Smooth vertex normals: the face normals of the triangles around each
+/// vertex, weighted by the triangle's angle at that vertex (Thürmer and
+/// Wüthrich 1998, "Computing Vertex Normals from Polygonal Facets"), as
+/// Mitsuba 3 computes them. Unused vertices get a zero normal.
+pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for f in faces {
+        let p = [
+            positions[f[0] as usize],
+            positions[f[1] as usize],
+            positions[f[2] as usize],
+        ];
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        for k in 0..3 {
+            let d0 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
+            let d1 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
+            let angle = d0.dot(d1).clamp(-1.0, 1.0).acos();
+            acc[f[k] as usize] += n * angle;
+        }
+    }
+    acc.iter().map(|n| n.normalize_or_zero()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ad::Dual;
+
+    fn tet() -> MeshData {
+        MeshData {
+            positions: vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ],
+            normals: None,
+            texcoords: None,
+            faces: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        }
+    }
+
+    fn build(data: MeshData) -> Result<(Mesh, ParamStore)> {
+        let mut store = ParamStore::new();
+        let m = Mesh::new(
+            "ply",
+            "m",
+            "test.ply",
+            data,
+            &Transform::IDENTITY,
+            MeshOptions::default(),
+            &mut store,
+        )?;
+        Ok((m, store))
+    }
+
+    #[test]
+    fn validation_errors_name_file_and_element() {
+        let mut d = tet();
+        d.positions[2].y = f32::NAN;
+        let e = build(d).unwrap_err().to_string();
+        assert!(
+            e.contains("test.ply") && e.contains("vertex 2") && e.contains("non-finite"),
+            "{e}"
+        );
+
+        let mut d = tet();
+        d.faces[1] = [0, 1, 7];
+        let e = build(d).unwrap_err().to_string();
+        assert!(e.contains("face 1") && e.contains("vertex 7"), "{e}");
+
+        let mut d = tet();
+        d.faces[3] = [1, 2, 2];
+        let e = build(d).unwrap_err().to_string();
+        assert!(e.contains("face 3") && e.contains("degenerate"), "{e}");
+
+        let mut d = tet();
+        d.positions.push(Vec3::new(2.0, 0.0, 0.0));
+        d.faces[3] = [0, 1, 4]; // collinear
+        let e = build(d).unwrap_err().to_string();
+        assert!(e.contains("face 3") && e.contains("degenerate"), "{e}");
+
+        let mut d = tet();
+        d.positions.push(Vec3::new(0.5, -1.0, 0.3));
+        d.faces.push([0, 1, 4]); // edge 0-1 now in three faces
+        let e = build(d).unwrap_err().to_string();
+        assert!(
+            e.contains("non-manifold edge between vertices 0 and 1"),
+            "{e}"
+        );
+
+        let e = build(MeshData::default()).unwrap_err().to_string();
+        assert!(e.contains("empty mesh"), "{e}");
+        assert!(build(tet()).is_ok());
+    }
+
+    #[test]
+    fn smooth_normals_are_angle_weighted() {
+        let (m, store) = build(tet()).unwrap();
+        let nid = m.normals.unwrap();
+        // vertex 0: three right angles with face normals -x, -y, -z
+        let n0 = Vec3::from_slice(&store.data(nid)[0..3]);
+        assert!((n0 - Vec3::splat(-1.0).normalize()).length() < 1e-6, "{n0}");
+        // vertex 1: faces -z (45°), -y (45°), and the slanted face (60°)
+        let w = [
+            (Vec3::new(0.0, 0.0, -1.0), 45f32.to_radians()),
+            (Vec3::new(0.0, -1.0, 0.0), 45f32.to_radians()),
+            (Vec3::splat(1.0).normalize(), 60f32.to_radians()),
+        ];
+        let want = w
+            .iter()
+            .fold(Vec3::ZERO, |a, (n, t)| a + *n * *t)
+            .normalize();
+        let n1 = Vec3::from_slice(&store.data(nid)[3..6]);
+        assert!((n1 - want).length() < 1e-5, "{n1} vs {want}");
+        assert!((m.surface_area() - (1.5 + 3f32.sqrt() / 2.0)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn to_world_applies_to_positions_and_normals() {
+        let mut store = ParamStore::new();
+        let mut d = tet();
+        d.normals = Some(vec![Vec3::Z; 4]);
+        let t = Transform::new(glam::Mat4::from_scale(Vec3::new(2.0, 1.0, 0.5))).unwrap();
+        let m = Mesh::new("ply", "m", "t", d, &t, MeshOptions::default(), &mut store).unwrap();
+        assert_eq!(m.vertex(&store, 1), Vec3::new(2.0, 0.0, 0.0));
+        assert_eq!(m.vertex(&store, 3), Vec3::new(0.0, 0.0, 0.5));
+        let n = Vec3::from_slice(&store.data(m.normals.unwrap())[0..3]);
+        assert!((n - Vec3::Z).length() < 1e-6);
+        assert_eq!(store.get(m.positions).shape, vec![4, 3]);
+        assert!(store.get(m.positions).flags.discontinuous);
+        // flat shading: no normals parameter
+        let mut store = ParamStore::new();
+        let opts = MeshOptions {
+            face_normals: true,
+            flip_normals: false,
+        };
+        let m = Mesh::new("ply", "m", "t", tet(), &t, opts, &mut store).unwrap();
+        assert!(m.normals.is_none() && store.id("m.vertex_normals").is_none());
+    }
+
+    /// Derivatives of t and p with respect to each coordinate of each vertex
+    /// (forward mode) against central finite differences.
+    #[test]
+    fn dual_hit_derivatives_match_finite_differences() {
+        let mut d = tet();
+        d.positions[3] = Vec3::new(0.2, 0.3, 1.0);
+        d.texcoords = Some(vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.2),
+            Vec2::new(0.1, 0.9),
+            Vec2::new(0.5, 0.5),
+        ]);
+        let (m, mut store) = build(d).unwrap();
+        // hits face 3 (1,2,3) from outside
+        let ray = Ray::new(
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(-0.55, -0.6, -0.62).normalize(),
+        );
+        let hit = Hit {
+            t: 0.0,
+            shape: 0,
+            prim: 3,
+            uv: Vec2::ZERO,
+        };
+        let si0 = m.surface_interaction::<f32>(&store, &ray, &hit);
+        let b = (si0.uv, si0.t);
+        assert!(b.1 > 0.0);
+        let base: Vec<f32> = store.data(m.positions).to_vec();
+        let eps = 1e-3;
+        for k in [3usize, 4, 5, 6, 7, 8, 9, 10, 11] {
+            let mut tan = vec![0.0; base.len()];
+            tan[k] = 1.0;
+            store.set_tangent("m.vertex_positions", &tan).unwrap();
+            let sd = m.surface_interaction::<Dual>(&store, &ray, &hit);
+            let eval = |store: &mut ParamStore, delta: f32| {
+                let mut p = base.clone();
+                p[k] += delta;
+                store.set("m.vertex_positions", &p).unwrap();
+                m.surface_interaction::<f32>(store, &ray, &hit)
+            };
+            let sp = eval(&mut store, eps);
+            let sm = eval(&mut store, -eps);
+            store.set("m.vertex_positions", &base).unwrap();
+            let fd_t = (sp.t - sm.t) / (2.0 * eps);
+            assert!(
+                (sd.t.d - fd_t).abs() < 2e-3 * (1.0 + fd_t.abs()),
+                "k={k}: {} vs {fd_t}",
+                sd.t.d
+            );
+            let fd_p = (sp.p.val() - sm.p.val()) / (2.0 * eps);
+            let dp = Vec3::new(sd.p.x.d, sd.p.y.d, sd.p.z.d);
+            assert!(
+                (dp - fd_p).length() < 2e-3 * (1.0 + fd_p.length()),
+                "k={k}: {dp} vs {fd_p}"
+            );
+            let fd_u = (sp.uv.x - sm.uv.x) / (2.0 * eps);
+            assert!(
+                (sd.uv.x.d - fd_u).abs() < 2e-3 * (1.0 + fd_u.abs()),
+                "k={k}"
+            );
+            let fd_n = (sp.n.val() - sm.n.val()) / (2.0 * eps);
+            let dn = Vec3::new(sd.n.x.d, sd.n.y.d, sd.n.z.d);
+            assert!(
+                (dn - fd_n).length() < 5e-3 * (1.0 + fd_n.length()),
+                "k={k}: {dn} vs {fd_n}"
+            );
+        }
+        // vertex 0 is not on face 3: zero derivative
+        let mut tan = vec![0.0; base.len()];
+        tan[0] = 1.0;
+        store.set_tangent("m.vertex_positions", &tan).unwrap();
+        let sd = m.surface_interaction::<Dual>(&store, &ray, &hit);
+        assert_eq!(sd.t.d, 0.0);
+    }
+
+    #[test]
+    fn hit_geometry_and_flip() {
+        let (m, _) = build(tet()).unwrap();
+        let mut store = ParamStore::new();
+        let opts = MeshOptions {
+            face_normals: true,
+            flip_normals: true,
+        };
+        let mf = Mesh::new(
+            "ply",
+            "f",
+            "t",
+            tet(),
+            &Transform::IDENTITY,
+            opts,
+            &mut store,
+        )
+        .unwrap();
+        let (_, s2) = build(tet()).unwrap();
+        let ray = Ray::new(Vec3::new(0.2, 0.3, 5.0), -Vec3::Z);
+        let hit = Hit {
+            t: 5.0,
+            shape: 0,
+            prim: 0,
+            uv: Vec2::ZERO,
+        };
+        let si = m.surface_interaction::<f32>(&s2, &ray, &hit);
+        assert!((si.t - 5.0).abs() < 1e-5);
+        assert!((si.p.val() - Vec3::new(0.2, 0.3, 0.0)).length() < 1e-6);
+        // face 0 = (0,2,1): normal -z, barycentric uv without texcoords
+        assert!((si.n.val() - -Vec3::Z).length() < 1e-6);
+        assert!((si.uv.val() - Vec2::new(0.3, 0.2)).length() < 1e-6);
+        assert!(si.wi.z < 0.0, "viewer on the back side: {:?}", si.wi);
+        let sf = mf.surface_interaction::<f32>(&store, &ray, &hit);
+        assert!((sf.n.val() - Vec3::Z).length() < 1e-6);
+        assert!((sf.sh_frame.n.val() - Vec3::Z).length() < 1e-6);
+        assert!((sf.wi.z - 1.0).abs() < 1e-5);
+    }
+
+    /// Area sampling is uniform: χ²-test of sample counts per triangle
+    /// against area fractions, and points lie on their triangle with pdf
+    /// 1/area.
+    #[test]
+    fn area_sampling_is_uniform() {
+        let mut d = tet();
+        d.positions[3] = Vec3::new(0.0, 0.0, 3.0);
+        let (m, store) = build(d).unwrap();
+        let n = 40_000usize;
+        let mut counts = [0usize; 4];
+        let mut half = [0usize; 2];
+        let mut rng = 0x1234_5678_9abc_def0u64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for _ in 0..n {
+            let s = m.sample_position(&store, Vec2::new(next(), next()));
+            counts[s.prim as usize] += 1;
+            assert!((s.pdf - 1.0 / m.surface_area()).abs() < 1e-6);
+            if s.prim == 0 {
+                // face 0 is the unit right triangle in z=0: split by x < 0.5
+                // has area fractions 3/4 (x<0.5) and 1/4
+                half[(s.p.x >= 0.5) as usize] += 1;
+                assert!(
+                    s.p.z.abs() < 1e-6
+                        && s.p.x >= 0.0
+                        && s.p.y >= 0.0
+                        && s.p.x + s.p.y <= 1.0 + 1e-6
+                );
+            }
+        }
+        let total = m.surface_area() as f64;
+        let mut chi2 = 0.0;
+        for (f, &c) in counts.iter().enumerate() {
+            let [p0, p1, p2] = m.triangle(&store, f);
+            let e = n as f64 * (0.5 * (p1 - p0).cross(p2 - p0).length() as f64) / total;
+            chi2 += (c as f64 - e).powi(2) / e;
+        }
+        let n0 = counts[0] as f64;
+        for (k, frac) in [(0usize, 0.75), (1, 0.25)] {
+            let e = n0 * frac;
+            chi2 += (half[k] as f64 - e).powi(2) / e;
+        }
+        // 4 dof (3 + 1); p = 1e-3 critical value of χ²(4) is 18.47
+        assert!(
+            chi2 < 18.47,
+            "chi2 = {chi2}, counts {counts:?}, half {half:?}"
+        );
+    }
+
+    #[test]
+    fn normals_follow_moved_positions() {
+        let (mut m, mut store) = build(tet()).unwrap();
+        let mut p = store.data(m.positions).to_vec();
+        p[11] = 2.0; // vertex 3 z
+        store.set("m.vertex_positions", &p).unwrap();
+        let changed = store.take_dirty();
+        let before = m.surface_area();
+        m.parameters_changed(&mut store, &changed).unwrap();
+        assert!(m.surface_area() > before);
+        let pos: Vec<Vec3> = p.chunks_exact(3).map(Vec3::from_slice).collect();
+        let want = vertex_normals(&pos, &m.faces);
+        let got = Vec3::from_slice(&store.data(m.normals.unwrap())[3..6]);
+        assert!((got - want[1]).length() < 1e-6);
+    }
+
+    const REF: &str = "/work/shared/reference/scenes/meshes";
+
+    fn load_ref(name: &str) -> Option<(Mesh, ParamStore)> {
+        let p = std::path::Path::new(REF).join(name);
+        if !p.exists() {
+            eprintln!("skipping: {} not present", p.display());
+            return None;
+        }
+        let data = crate::geometry::ply::load_ply(&p).unwrap();
+        Some(build(data).unwrap())
+    }
+
+    #[test]
+    fn reference_meshes_load() {
+        if let Some((m, s)) = load_ref("icosphere3.ply") {
+            assert_eq!((m.vertex_count(&s), m.face_count()), (642, 1280));
+            assert!(m.normals.is_some() && m.texcoords.is_none());
+        }
+        if let Some((m, s)) = load_ref("displaced_sphere.ply") {
+            assert_eq!((m.vertex_count(&s), m.face_count()), (163_842, 327_680));
+        }
+        for name in ["plane_uv.ply", "uv_sphere.ply"] {
+            if let Some((m, _)) = load_ref(name) {
+                assert!(m.texcoords.is_some(), "{name}");
+            }
+        }
+    }
+}

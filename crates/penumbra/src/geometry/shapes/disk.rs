@@ -1,0 +1,211 @@
+//! The `disk` shape plugin (analytic): the unit disk in the z = 0 plane,
+//! normal +z, placed by `to_world` (any affine map: ellipses allowed),
+//! `flip_normals` (false). uv is polar as in Mitsuba 3:
+//! uv = (r, φ / 2π) of the hit point in the local frame.
+//!
+//! Parameter in the store: `<key>.to_world` (`[4, 4]`, row-major, geometry).
+//! The normal is `to_world`'s normal transform of +z.
+
+use crate::ad::Real;
+use crate::error::Result;
+use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
+use crate::math::{warp, Frame, Transform, V2, V3};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::scene::{LoadContext, Node};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// An analytic disk.
+#[derive(Clone, Debug)]
+pub struct Disk {
+    pub key: String,
+    /// `<key>.to_world`, 16 floats, row-major.
+    pub to_world: ParamId,
+    pub flip_normals: bool,
+    /// Whether `to_world` mirrors (its 3×3 part has a negative determinant).
+    mirror: bool,
+    area: f32,
+}
+
+/// World-space frame of a disk: centre, images of local x and y.
+#[derive(Clone, Copy, Debug)]
+pub struct DiskFrame {
+    pub c: Vec3,
+    pub a0: Vec3,
+    pub a1: Vec3,
+}
+
+impl Disk {
+    /// Builds the disk of a `<shape type="disk">` node.
+    pub fn load(node: &Node, ctx: &mut LoadContext) -> Result<Disk> {
+        let t = node.transform("to_world")?;
+        let flip_normals = node.bool("flip_normals", false)?;
+        Self::new(&node.key, &t, flip_normals, &mut ctx.store).map_err(|e| node.error(e))
+    }
+
+    /// A disk placed by `to_world` (registers `<key>.to_world`).
+    pub fn new(
+        key: &str,
+        to_world: &Transform,
+        flip_normals: bool,
+        store: &mut ParamStore,
+    ) -> Result<Disk> {
+        let rows: Vec<f32> = to_world.m.transpose().to_cols_array().to_vec();
+        let id = store.add(
+            format!("{key}.to_world"),
+            rows,
+            vec![4, 4],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )?;
+        let mut d = Disk {
+            key: key.to_string(),
+            to_world: id,
+            flip_normals,
+            mirror: false,
+            area: 0.0,
+        };
+        d.parameters_changed(store)?;
+        Ok(d)
+    }
+
+    /// Current world frame (f32).
+    pub fn frame(&self, store: &ParamStore) -> DiskFrame {
+        let m = store.data(self.to_world);
+        DiskFrame {
+            c: Vec3::new(m[3], m[7], m[11]),
+            a0: Vec3::new(m[0], m[4], m[8]),
+            a1: Vec3::new(m[1], m[5], m[9]),
+        }
+    }
+
+    /// Refreshes the cached area and orientation; errors if the disk
+    /// became degenerate.
+    pub fn parameters_changed(&mut self, store: &ParamStore) -> Result<()> {
+        let m = store.data(self.to_world);
+        let a2 = Vec3::new(m[2], m[6], m[10]);
+        let f = self.frame(store);
+        let nn = f.a0.cross(f.a1);
+        self.area = PI * nn.length();
+        self.mirror = nn.dot(a2) < 0.0;
+        if self.area.is_nan() || self.area <= 0.0 {
+            return Err(crate::error::Error::Param {
+                key: store.get(self.to_world).key.clone(),
+                msg: "the disk's to_world maps it to zero area".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Unit normal (before `flip_normals`).
+    fn normal_sign(&self) -> f32 {
+        if self.mirror {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+
+    /// Ray–disk intersection in f32 on (tmin, tmax).
+    #[inline]
+    pub fn intersect_f32(f: &DiskFrame, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> f32 {
+        let n = f.a0.cross(f.a1);
+        let den = n.dot(d);
+        if den == 0.0 {
+            return f32::INFINITY;
+        }
+        let t = n.dot(f.c - o) / den;
+        if !(t > tmin && t < tmax) {
+            return f32::INFINITY;
+        }
+        let q = o + d * t - f.c;
+        let nn = n.dot(n);
+        let x = q.cross(f.a1).dot(n) / nn;
+        let y = f.a0.cross(q).dot(n) / nn;
+        if x * x + y * y <= 1.0 {
+            t
+        } else {
+            f32::INFINITY
+        }
+    }
+}
+
+impl ShapeT for Disk {
+    fn surface_interaction<R: Real>(
+        &self,
+        store: &ParamStore,
+        ray: &Ray,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
+        let id = self.to_world;
+        let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
+        let c = V3::new(m(0, 3), m(1, 3), m(2, 3));
+        let a0 = V3::new(m(0, 0), m(1, 0), m(2, 0));
+        let a1 = V3::new(m(0, 1), m(1, 1), m(2, 1));
+        let o = V3::<R>::cst(ray.o);
+        let d = V3::<R>::cst(ray.d);
+        let nv = a0.cross(a1);
+        let den = nv.dot(d);
+        let t = if den.val() != 0.0 {
+            nv.dot(c - o) / den
+        } else {
+            R::cst(hit.t)
+        };
+        let p = o + d * t;
+        let q = p - c;
+        let nn = nv.dot(nv);
+        let x = q.cross(a1).dot(nv) / nn;
+        let y = a0.cross(q).dot(nv) / nn;
+        let rr = (x * x + y * y).safe_sqrt();
+        let mut phi = y.atan2(x);
+        if phi.val() < 0.0 {
+            phi += R::cst(2.0 * PI);
+        }
+        let uv = V2::new(rr, phi * (0.5 / PI));
+        let dpdu = if rr.val() > 0.0 {
+            (a0 * x + a1 * y) / rr
+        } else {
+            a0
+        };
+        let mut n = nv.normalize() * R::cst(self.normal_sign());
+        if self.flip_normals {
+            n = -n;
+        }
+        let sh_frame = Frame::from_normal_tangent(n, dpdu);
+        let wi = sh_frame.to_local(-d);
+        SurfaceInteraction {
+            t,
+            p,
+            n,
+            sh_frame,
+            uv,
+            wi,
+            shape: hit.shape,
+            prim: hit.prim,
+        }
+    }
+
+    fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
+        let f = self.frame(store);
+        let l = warp::square_to_uniform_disk_concentric(u);
+        let mut n = f.a0.cross(f.a1).normalize() * self.normal_sign();
+        if self.flip_normals {
+            n = -n;
+        }
+        let mut phi = l.y.atan2(l.x);
+        if phi < 0.0 {
+            phi += 2.0 * PI;
+        }
+        PositionSample {
+            p: f.c + f.a0 * l.x + f.a1 * l.y,
+            n,
+            uv: Vec2::new(l.length(), phi / (2.0 * PI)),
+            pdf: 1.0 / self.area,
+            prim: 0,
+        }
+    }
+
+    fn surface_area(&self) -> f32 {
+        self.area
+    }
+}
