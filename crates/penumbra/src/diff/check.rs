@@ -126,13 +126,13 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
             };
             // finite differences with identical random numbers
             scene.params.set(key, &shifted(opts.eps))?;
-            scene.update();
+            scene.update()?;
             let plus = render(scene, &ro)?;
             scene.params.set(key, &shifted(-opts.eps))?;
-            scene.update();
+            scene.update()?;
             let minus = render(scene, &ro)?;
             scene.params.set(key, &theta)?;
-            scene.update();
+            scene.update()?;
             let d: Vec<f32> = plus
                 .data
                 .iter()
@@ -161,7 +161,7 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
     })();
     // leave the scene as it was, whatever happened
     scene.params.set(key, &theta)?;
-    scene.update();
+    scene.update()?;
     result?;
     let shape = last.expect("at least one batch");
     let image = |acc: Option<Vec<f64>>| Rendered {

@@ -233,6 +233,19 @@ impl Accel {
         a
     }
 
+    /// Centre and radius of a sphere enclosing all shapes (placing
+    /// environment and directional emitters); the unit sphere when empty.
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        match self.bvh2.nodes.first() {
+            Some(root) => {
+                let b = root.aabb();
+                let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+                ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+            }
+            None => (Vec3::ZERO, 1.0),
+        }
+    }
+
     /// Updates the structure after geometry parameters changed: refits the
     /// boxes of the existing tree (rebuilds only if the primitive set
     /// changed).

@@ -41,10 +41,7 @@ impl Film {
                 "crop window {cw}x{ch} at ({cx}, {cy}) exceeds the film size {width}x{height}"
             )));
         }
-        let alpha = match node.choice("pixel_format", &["rgb", "rgba"])?.as_str() {
-            "rgba" => true,
-            _ => false,
-        };
+        let alpha = node.choice("pixel_format", &["rgb", "rgba"])? == "rgba";
         // Output precision: Penumbra always writes float32 EXR.
         node.choice("component_format", &["float32", "float16"])?;
         node.choice("file_format", &["openexr", "exr"])?;

@@ -155,7 +155,7 @@ impl PathIntegrator {
                 if u_rr >= q {
                     return;
                 }
-                throughput = throughput * R::cst(1.0 / q);
+                throughput *= R::cst(1.0 / q);
             }
             depth += 1;
         }

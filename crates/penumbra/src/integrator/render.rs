@@ -53,12 +53,33 @@ impl Rendered {
     }
 }
 
-/// Renders the scene with its integrator and sensor.
+/// Renders the scene with its integrator and sensor. With an `rgba` film,
+/// an alpha channel follows the colour: 1 where the camera ray hits a
+/// surface, 0 where it escapes (as Mitsuba).
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
     let integrator = &scene.integrator;
-    let names = integrator.channel_names();
+    let mut names = integrator.channel_names();
+    let alpha = scene.sensor(opts.sensor)?.film.alpha;
+    let n = names.len();
+    if alpha {
+        if n > 64 {
+            return Err(Error::Invalid("an rgba film supports at most 64 channels".into()));
+        }
+        names.insert(3.min(n), "A".into());
+    }
     let block = render_samples(scene, opts, names.len(), |ray, rng, out| {
-        integrator.sample(scene, ray, rng, out)
+        if alpha {
+            // colour, alpha, then any further (AOV) channels
+            let mut buf = [0.0f32; 64];
+            let rest = &mut buf[..n];
+            integrator.sample(scene, ray, rng, rest);
+            let k = 3.min(n);
+            out[..k].copy_from_slice(&rest[..k]);
+            out[k] = if scene.intersect(&ray).is_some() { 1.0 } else { 0.0 };
+            out[k + 1..].copy_from_slice(&rest[k..]);
+        } else {
+            integrator.sample(scene, ray, rng, out)
+        }
     })?;
     Ok(Rendered {
         width: block.width,

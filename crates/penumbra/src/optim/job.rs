@@ -271,7 +271,7 @@ impl Job {
             };
             scene.params.set(&p.key, &init)?;
         }
-        scene.update();
+        scene.update()?;
 
         let keys: Vec<&str> = spec.params.iter().map(|p| p.key.as_str()).collect();
         let mut opt = Optimizer::new(
@@ -312,7 +312,7 @@ impl Job {
                 e.data.iter_mut().for_each(|x| *x /= n_views as f32);
             }
             opt.step(&mut scene.params, &g)?;
-            scene.update();
+            scene.update()?;
             losses.push(total);
             progress(it, total);
         }

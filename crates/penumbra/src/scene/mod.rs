@@ -179,18 +179,25 @@ impl Scene {
         self.emitters[em as usize].pdf_direction(&self.params, &self.shapes, ref_p, d, p, n) * pick
     }
 
-    /// Applies parameter updates: rebuilds what depends on changed
-    /// parameters (the acceleration structure after vertex moves).
-    pub fn update(&mut self) {
+    /// Applies parameter updates: refreshes what depends on the changed
+    /// parameters (vertex normals and the acceleration structure after
+    /// vertex moves, envmap sampling after texel changes, BSDF sampling
+    /// weights).
+    pub fn update(&mut self) -> Result<()> {
         let changed = self.params.take_dirty();
+        if changed.is_empty() {
+            return Ok(());
+        }
+        for s in &mut self.shapes {
+            s.parameters_changed(&mut self.params, &changed)?;
+        }
+        // normals recomputed above are consequences, not new updates
+        self.params.take_dirty();
         if changed
             .iter()
             .any(|&id| self.params.get(id).flags.discontinuous)
         {
             self.accel.update(&self.shapes, &self.params);
-        }
-        if changed.is_empty() {
-            return;
         }
         for e in &mut self.emitters {
             e.parameters_changed(&self.params, &changed);
@@ -198,5 +205,6 @@ impl Scene {
         for b in &mut self.bsdfs {
             b.parameters_changed(&self.params);
         }
+        Ok(())
     }
 }
