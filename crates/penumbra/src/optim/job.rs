@@ -292,7 +292,14 @@ impl Job {
                 let img = render(scene, &ro)?;
                 let (l, d_img) = loss.eval(&img.data, target)?;
                 total += l / n_views as f64;
-                let g = render_backward(scene, &d_img, Some(&keys), &ro)?;
+                // replay with a decorrelated seed (as Mitsuba's seed_grad):
+                // reusing the primal's samples biases E[∂loss/∂θ] by the
+                // covariance of the image noise and its derivative
+                let ro_grad = RenderOptions {
+                    seed: ro.seed ^ 0x9e37_79b9,
+                    ..ro.clone()
+                };
+                let g = render_backward(scene, &d_img, Some(&keys), &ro_grad)?;
                 grads = Some(match grads {
                     None => g,
                     Some(mut acc) => {
