@@ -20,6 +20,10 @@ fn glyph(c: char) -> [u8; 7] {
         '.' => [0, 0, 0, 0, 0, 0x0c, 0x0c],
         '-' => [0, 0, 0, 0x1f, 0, 0, 0],
         'e' => [0, 0, 0x0e, 0x11, 0x1f, 0x10, 0x0e],
+        ' ' => [0; 7],
+        'm' => [0, 0, 0x1a, 0x15, 0x15, 0x11, 0x11],
+        'x' => [0, 0, 0x11, 0x0a, 0x04, 0x0a, 0x11],
+        'p' => [0, 0, 0x1e, 0x11, 0x1e, 0x10, 0x10],
         'a' => [0, 0, 0x0e, 0x01, 0x0f, 0x11, 0x0f],
         'i' => [0x04, 0, 0x0c, 0x04, 0x04, 0x04, 0x0e],
         'l' => [0x0c, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0e],
@@ -84,7 +88,7 @@ impl Canvas {
 
 /// Plots `values` (e.g. a loss per iteration) against their index, y on a
 /// log scale when all values are positive. Returns a linear-RGB image.
-pub fn plot_curve(values: &[f64], width: usize, height: usize) -> Image {
+pub fn plot_curve(values: &[f64], width: usize, height: usize, title: &str) -> Image {
     let mut c = Canvas {
         w: width,
         h: height,
@@ -141,7 +145,7 @@ pub fn plot_curve(values: &[f64], width: usize, height: usize) -> Image {
     c.line((left, top), (left, bottom), black);
     c.line((left, bottom), (right, bottom), black);
     c.text(right - 6 * 9, bottom + 18, "iteration", black);
-    c.text(4, 4, "loss", black);
+    c.text(4, 4, title, black);
     let blue = [0.05, 0.2, 0.8];
     let mut prev: Option<(i64, i64)> = None;
     for (i, &v) in values.iter().enumerate() {
@@ -172,7 +176,7 @@ mod tests {
     #[test]
     fn curve_is_drawn_inside_the_axes() {
         let loss: Vec<f64> = (0..50).map(|i| 0.5 * (-0.1 * i as f64).exp()).collect();
-        let img = plot_curve(&loss, 320, 200);
+        let img = plot_curve(&loss, 320, 200, "loss");
         let blue = |x: usize, y: usize| {
             let o = (y * 320 + x) * 3;
             img.data[o + 2] > 0.7 && img.data[o] < 0.1

@@ -140,6 +140,9 @@ fn default_up() -> [f32; 3] {
 pub struct JobResult {
     /// Loss per iteration (mean over views).
     pub losses: Vec<f64>,
+    /// Largest absolute parameter error per iteration, against the values
+    /// the scene was loaded with (when the targets were rendered from it).
+    pub param_error_curve: Vec<f64>,
     /// Per parameter: largest absolute error against the values the scene
     /// was loaded with, when the targets were rendered from it.
     pub param_errors: Vec<(String, f32)>,
@@ -279,6 +282,18 @@ impl Job {
             spec.params.iter().map(|p| (p.key.clone(), p.lr)).collect(),
         )?;
         let mut losses = Vec::with_capacity(spec.iterations as usize);
+        let mut error_curve = Vec::new();
+        let known_truth = spec.target.render_spp.is_some();
+        let max_error = |store: &crate::params::ParamStore| -> Result<f64> {
+            let mut e = 0.0f64;
+            for (p, t) in spec.params.iter().zip(&truth) {
+                let d = store.data(store.require(&p.key)?);
+                for (a, b) in d.iter().zip(t) {
+                    e = e.max((a - b).abs() as f64);
+                }
+            }
+            Ok(e)
+        };
         for it in 0..spec.iterations {
             let mut total = 0.0;
             let mut grads: Option<crate::diff::Gradients> = None;
@@ -321,6 +336,9 @@ impl Job {
             opt.step(&mut scene.params, &g)?;
             scene.update()?;
             losses.push(total);
+            if known_truth {
+                error_curve.push(max_error(&scene.params)?);
+            }
             progress(it, total);
         }
 
@@ -328,11 +346,23 @@ impl Job {
         let csv: String = losses
             .iter()
             .enumerate()
-            .map(|(i, l)| format!("{i},{l:e}\n"))
+            .map(|(i, l)| match error_curve.get(i) {
+                Some(e) => format!("{i},{l:e},{e:e}\n"),
+                None => format!("{i},{l:e},\n"),
+            })
             .collect();
-        std::fs::write(out.join("loss.csv"), format!("iteration,loss\n{csv}"))
-            .map_err(|e| Error::file(out.join("loss.csv"), e))?;
-        write_png(&out.join("loss.png"), &plot_curve(&losses, 640, 400))?;
+        std::fs::write(
+            out.join("loss.csv"),
+            format!("iteration,loss,max_param_error\n{csv}"),
+        )
+        .map_err(|e| Error::file(out.join("loss.csv"), e))?;
+        write_png(&out.join("loss.png"), &plot_curve(&losses, 640, 400, "loss"))?;
+        if !error_curve.is_empty() {
+            write_png(
+                &out.join("param_error.png"),
+                &plot_curve(&error_curve, 640, 400, "max param error"),
+            )?;
+        }
         let mut summary = String::new();
         let mut param_errors = Vec::new();
         for (p, t) in spec.params.iter().zip(&truth) {
@@ -382,6 +412,7 @@ impl Job {
             .map_err(|e| Error::file(out.join("params.txt"), e))?;
         Ok(JobResult {
             losses,
+            param_error_curve: error_curve,
             param_errors,
             output: out,
         })
