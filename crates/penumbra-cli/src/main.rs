@@ -2,10 +2,10 @@
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use penumbra::diff::{check_gradient, CheckOptions, Estimate};
+use penumbra::diff::{check_gradient, render_backward, render_forward, CheckOptions, Estimate};
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, RenderOptions};
-use penumbra::optim::Job;
+use penumbra::optim::{Job, Loss};
 use penumbra::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -48,6 +48,40 @@ enum Command {
         /// No progress bar or timing report.
         #[arg(short, long)]
         quiet: bool,
+    },
+    /// Derivatives of a render: a forward-mode derivative image along the
+    /// parameters' own values (d image / d s for θ·s at s = 1), or
+    /// reverse-mode gradients of an L2 loss against a target image (of the
+    /// image sum without --target).
+    Grad {
+        scene: PathBuf,
+        /// Parameter key (repeatable).
+        #[arg(long = "param", required = true)]
+        params: Vec<String>,
+        /// forward or reverse.
+        #[arg(long, default_value = "reverse")]
+        mode: String,
+        /// Target image for the L2 loss (reverse mode).
+        #[arg(long)]
+        target: Option<PathBuf>,
+        /// Set every element of the parameters to this value first.
+        #[arg(long)]
+        init: Option<f32>,
+        #[arg(long)]
+        spp: Option<u32>,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+        /// Output folder (derivative image, gradient images of textures).
+        #[arg(short, long, default_value = "grad")]
+        output: PathBuf,
+        /// Time this many more runs after the first and print a JSON line
+        /// with timings and peak memory.
+        #[arg(long)]
+        reps: Option<usize>,
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Check derivatives: finite differences (same random numbers) vs
     /// forward mode vs reverse mode, per parameter, over several batches.
@@ -206,6 +240,140 @@ fn run(cli: Cli) -> Result<(), String> {
                     spp.unwrap_or_else(|| scene.sensors[0].sampler.sample_count()),
                     t_load.as_secs_f64(),
                     t_render.as_secs_f64()
+                );
+            }
+            Ok(())
+        }
+        Command::Grad {
+            scene,
+            params,
+            mode,
+            target,
+            init,
+            spp,
+            seed,
+            define,
+            output,
+            reps,
+            threads,
+        } => {
+            let defines = parse_defines(&define)?;
+            let mut scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            let err = |e: penumbra::Error| e.to_string();
+            if let Some(v) = init {
+                for key in &params {
+                    let id = scene.params.require(key).map_err(err)?;
+                    let n = scene.params.data(id).len();
+                    scene.params.set(key, &vec![v; n]).map_err(err)?;
+                }
+                scene.update().map_err(err)?;
+            }
+            std::fs::create_dir_all(&output)
+                .map_err(|e| format!("{}: cannot create folder: {e}", output.display()))?;
+            let keys: Vec<&str> = params.iter().map(String::as_str).collect();
+            let target = target
+                .map(|t| penumbra::image::read_image(&t))
+                .transpose()
+                .map_err(err)?;
+            let mut times = Vec::new();
+            for i in 0..=reps.unwrap_or(0) {
+                let opts = RenderOptions {
+                    spp,
+                    seed: seed + i as u64,
+                    threads,
+                    ..Default::default()
+                };
+                let t = Instant::now();
+                match mode.as_str() {
+                    "forward" => {
+                        let tangents: Vec<Vec<f32>> = keys
+                            .iter()
+                            .map(|k| {
+                                scene
+                                    .params
+                                    .require(k)
+                                    .map(|id| scene.params.data(id).to_vec())
+                            })
+                            .collect::<Result<_, _>>()
+                            .map_err(err)?;
+                        let pairs: Vec<(&str, &[f32])> = keys
+                            .iter()
+                            .copied()
+                            .zip(tangents.iter().map(Vec::as_slice))
+                            .collect();
+                        let d = render_forward(&mut scene, &pairs, &opts).map_err(err)?;
+                        times.push(t.elapsed().as_secs_f64());
+                        if i == 0 {
+                            let img = Image {
+                                width: d.width,
+                                height: d.height,
+                                channels: 3,
+                                data: d.data,
+                            };
+                            write_exr(&output.join("dimage.exr"), &img, &["R", "G", "B"])
+                                .map_err(err)?;
+                        }
+                    }
+                    "reverse" => {
+                        let img = render(&scene, &opts).map_err(err)?;
+                        let (loss, d_img) = match &target {
+                            Some(t) => Loss::L2.eval(&img.data, &t.data).map_err(err)?,
+                            None => (f64::NAN, vec![1.0; img.data.len()]),
+                        };
+                        // decorrelated replay seed, as Mitsuba's seed_grad
+                        let gopts = RenderOptions {
+                            seed: opts.seed ^ 0x9e37_79b9,
+                            ..opts.clone()
+                        };
+                        let g = render_backward(&mut scene, &d_img, Some(&keys), &gopts)
+                            .map_err(err)?;
+                        times.push(t.elapsed().as_secs_f64());
+                        if i == 0 {
+                            if target.is_some() {
+                                println!("loss {loss:.6e}");
+                            }
+                            for e in &g.entries {
+                                let sum: f64 = e.data.iter().map(|&v| v as f64).sum();
+                                let head: Vec<String> =
+                                    e.data.iter().take(6).map(|v| format!("{v:.5e}")).collect();
+                                println!(
+                                    "d loss / d {} (shape {:?}): [{}{}], sum {sum:.6e}",
+                                    e.key,
+                                    e.shape,
+                                    head.join(", "),
+                                    if e.data.len() > 6 { ", …" } else { "" }
+                                );
+                                if e.shape.len() == 3 && e.shape[2] <= 3 {
+                                    let img = Image {
+                                        width: e.shape[1],
+                                        height: e.shape[0],
+                                        channels: e.shape[2],
+                                        data: e.data.clone(),
+                                    };
+                                    let names: &[&str] = if e.shape[2] == 1 {
+                                        &["Y"]
+                                    } else {
+                                        &["R", "G", "B"]
+                                    };
+                                    write_exr(&output.join(format!("{}.exr", e.key)), &img, names)
+                                        .map_err(err)?;
+                                }
+                            }
+                        }
+                    }
+                    other => {
+                        return Err(format!("--mode must be forward or reverse, not '{other}'"))
+                    }
+                }
+            }
+            if reps.is_some() {
+                let mut warm = times[1..].to_vec();
+                warm.sort_by(f64::total_cmp);
+                let median = warm.get(warm.len() / 2).copied().unwrap_or(f64::NAN);
+                println!(
+                    "{{\"mode\": \"{mode}\", \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
+                    times[0],
+                    peak_rss_mb()
                 );
             }
             Ok(())

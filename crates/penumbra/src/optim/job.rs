@@ -356,7 +356,10 @@ impl Job {
             format!("iteration,loss,max_param_error\n{csv}"),
         )
         .map_err(|e| Error::file(out.join("loss.csv"), e))?;
-        write_png(&out.join("loss.png"), &plot_curve(&losses, 640, 400, "loss"))?;
+        write_png(
+            &out.join("loss.png"),
+            &plot_curve(&losses, 640, 400, "loss"),
+        )?;
         if !error_curve.is_empty() {
             write_png(
                 &out.join("param_error.png"),

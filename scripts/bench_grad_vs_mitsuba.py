@@ -1,0 +1,101 @@
+#!/usr/bin/env python3
+"""Gradient benchmarks: Penumbra beside Mitsuba 3's prb, measured in the same
+run, and the peak memory of Penumbra's reverse mode against path depth.
+
+  1. The jobs of ../shared/reference/scripts/bench.py (128², 64 spp):
+       grad_rev_bsdf   reverse mode, dL2/d red.reflectance (cbox, 0.4 grey)
+       grad_rev_tex    reverse mode, dL2/d plane texture (textured, 0.5)
+       grad_fwd_albedo forward mode, d image / d scale of red.reflectance
+     each as `penumbra grad ... --reps N` (primal render + gradient pass,
+     first call and warm median) and Mitsuba llvm_ad_rgb (first call with JIT,
+     warm median).
+  2. Peak RSS of `penumbra grad` (reverse, cbox 128², 64 spp) for max_depth
+     2..64: path replay keeps only parameter and image buffers, so memory
+     should not grow with depth.
+
+  python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+KIT = os.path.join(ROOT, '..', 'shared', 'reference')
+EXE = os.path.join(ROOT, 'target', 'release', 'penumbra')
+
+
+def last_json(out, prefix=''):
+    for line in reversed(out.splitlines()):
+        if line.startswith(prefix + '{'):
+            return json.loads(line[len(prefix):])
+    raise SystemExit(f'no JSON result in:\n{out}')
+
+
+def penumbra(args):
+    out = subprocess.run([EXE, 'grad', *args], capture_output=True, text=True, cwd=ROOT)
+    if out.returncode:
+        raise SystemExit(out.stderr)
+    return last_json(out.stdout)
+
+
+def peak_rss_mb(args):
+    """Peak RSS of a whole penumbra process (GNU time), in MB."""
+    out = subprocess.run(['/usr/bin/time', '-f', 'MAXRSS %M', EXE, 'grad', *args],
+                         capture_output=True, text=True, cwd=ROOT)
+    if out.returncode:
+        raise SystemExit(out.stderr)
+    kb = [l for l in out.stderr.splitlines() if l.startswith('MAXRSS')][-1].split()[1]
+    return int(kb) / 1024
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--reps', type=int, default=3)
+    ap.add_argument('--no-mitsuba', action='store_true')
+    ap.add_argument('--mitsuba-python',
+                    default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
+    a = ap.parse_args()
+    subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
+    r = str(a.reps)
+    jobs = {
+        'grad_rev_bsdf': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
+                          '--init', '0.4', '--target', 'scenes/refs/cbox_target128.exr',
+                          '--spp', '64', '--reps', r, '-o', 'out/bench_grad'],
+        'grad_rev_tex': ['scenes/textured.xml', '-D', 'res=128', '--param',
+                         'plane.bsdf.reflectance.data', '--init', '0.5', '--target',
+                         'scenes/refs/textured_target128.exr', '--spp', '64', '--reps', r,
+                         '-o', 'out/bench_grad'],
+        'grad_fwd_albedo': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
+                            '--mode', 'forward', '--spp', '64', '--reps', r, '-o', 'out/bench_grad'],
+    }
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
+        'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
+    print('| job (128², 64 spp) | Penumbra first s | Penumbra warm s | Mitsuba prb first s '
+          '| Mitsuba prb warm s | Mitsuba warm / Penumbra warm | Mitsuba first / Penumbra first |')
+    print('|---|---|---|---|---|---|---|')
+    for name, args in jobs.items():
+        ours = penumbra(args)
+        if a.no_mitsuba:
+            mi = {'first_s': float('nan'), 'warm_median_s': float('nan')}
+        else:
+            out = subprocess.run([a.mitsuba_python, os.path.join(KIT, 'scripts', 'bench.py'), name,
+                                  '--spp', '64', '--reps', r], capture_output=True, text=True, env=env)
+            mi = last_json(out.stdout, 'RESULT ')
+        print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
+              f'| {mi["first_s"]:.3f} | {mi["warm_median_s"]:.3f} '
+              f'| {mi["warm_median_s"] / ours["warm_median_s"]:.2f} '
+              f'| {mi["first_s"] / ours["first_s"]:.2f} |', flush=True)
+    print('\n| max_depth | peak RSS MB (reverse mode, cbox 128², 64 spp) |')
+    print('|---|---|')
+    for depth in [2, 4, 8, 16, 32, 64]:
+        mb = peak_rss_mb(['scenes/cbox.xml', '-D', 'res=128', '-D', f'max_depth={depth}',
+                          '--param', 'red.reflectance.value', '--init', '0.4', '--target',
+                          'scenes/refs/cbox_target128.exr', '--spp', '64', '-o', 'out/bench_grad'])
+        print(f'| {depth} | {mb:.1f} |', flush=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
