@@ -480,8 +480,8 @@ fn run(cli: Cli) -> Result<(), String> {
                 result.losses.len(),
                 result.output.display()
             );
-            for (key, err) in &result.param_errors {
-                println!("{key}: max |error| vs the scene's value {err:.4}");
+            for (key, mean, max) in &result.param_errors {
+                println!("{key}: |error| vs the scene's value: mean {mean:.4}, max {max:.4}");
             }
             Ok(())
         }

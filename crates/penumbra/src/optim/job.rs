@@ -140,12 +140,13 @@ fn default_up() -> [f32; 3] {
 pub struct JobResult {
     /// Loss per iteration (mean over views).
     pub losses: Vec<f64>,
-    /// Largest absolute parameter error per iteration, against the values
-    /// the scene was loaded with (when the targets were rendered from it).
+    /// Mean absolute error of all optimised elements per iteration, against
+    /// the values the scene was loaded with (when the targets were rendered
+    /// from it).
     pub param_error_curve: Vec<f64>,
-    /// Per parameter: largest absolute error against the values the scene
-    /// was loaded with, when the targets were rendered from it.
-    pub param_errors: Vec<(String, f32)>,
+    /// Per parameter: (mean, max) absolute error against the values the
+    /// scene was loaded with, when the targets were rendered from it.
+    pub param_errors: Vec<(String, f64, f64)>,
     pub output: PathBuf,
 }
 
@@ -284,15 +285,14 @@ impl Job {
         let mut losses = Vec::with_capacity(spec.iterations as usize);
         let mut error_curve = Vec::new();
         let known_truth = spec.target.render_spp.is_some();
-        let max_error = |store: &crate::params::ParamStore| -> Result<f64> {
-            let mut e = 0.0f64;
+        let mean_error = |store: &crate::params::ParamStore| -> Result<f64> {
+            let (mut sum, mut n) = (0.0f64, 0usize);
             for (p, t) in spec.params.iter().zip(&truth) {
                 let d = store.data(store.require(&p.key)?);
-                for (a, b) in d.iter().zip(t) {
-                    e = e.max((a - b).abs() as f64);
-                }
+                sum += d.iter().zip(t).map(|(a, b)| (a - b).abs() as f64).sum::<f64>();
+                n += d.len();
             }
-            Ok(e)
+            Ok(sum / n as f64)
         };
         for it in 0..spec.iterations {
             let mut total = 0.0;
@@ -337,7 +337,7 @@ impl Job {
             scene.update()?;
             losses.push(total);
             if known_truth {
-                error_curve.push(max_error(&scene.params)?);
+                error_curve.push(mean_error(&scene.params)?);
             }
             progress(it, total);
         }
@@ -353,7 +353,7 @@ impl Job {
             .collect();
         std::fs::write(
             out.join("loss.csv"),
-            format!("iteration,loss,max_param_error\n{csv}"),
+            format!("iteration,loss,mean_abs_param_error\n{csv}"),
         )
         .map_err(|e| Error::file(out.join("loss.csv"), e))?;
         write_png(
@@ -363,7 +363,7 @@ impl Job {
         if !error_curve.is_empty() {
             write_png(
                 &out.join("param_error.png"),
-                &plot_curve(&error_curve, 640, 400, "max param error"),
+                &plot_curve(&error_curve, 640, 400, "mean abs param error"),
             )?;
         }
         let mut summary = String::new();
@@ -387,14 +387,16 @@ impl Job {
                 )?;
             }
             let err = if spec.target.render_spp.is_some() {
-                let e = param
+                let errs: Vec<f64> = param
                     .data
                     .iter()
                     .zip(t)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0f32, f32::max);
-                param_errors.push((p.key.clone(), e));
-                format!(" (max |error| vs the scene's value: {e:.4})")
+                    .map(|(a, b)| (a - b).abs() as f64)
+                    .collect();
+                let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+                let max = errs.iter().cloned().fold(0.0, f64::max);
+                param_errors.push((p.key.clone(), mean, max));
+                format!(" (|error| vs the scene's value: mean {mean:.4}, max {max:.4})")
             } else {
                 String::new()
             };
