@@ -289,7 +289,11 @@ impl Job {
             let (mut sum, mut n) = (0.0f64, 0usize);
             for (p, t) in spec.params.iter().zip(&truth) {
                 let d = store.data(store.require(&p.key)?);
-                sum += d.iter().zip(t).map(|(a, b)| (a - b).abs() as f64).sum::<f64>();
+                sum += d
+                    .iter()
+                    .zip(t)
+                    .map(|(a, b)| (a - b).abs() as f64)
+                    .sum::<f64>();
                 n += d.len();
             }
             Ok(sum / n as f64)
