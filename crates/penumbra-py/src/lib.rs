@@ -16,9 +16,7 @@ use penumbra::params::Domain;
 use penumbra::scene::{Class, Scene};
 use penumbra::Error;
 use pyo3::create_exception;
-use pyo3::exceptions::{
-    PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
-};
+use pyo3::exceptions::{PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::io::Write;
@@ -307,7 +305,11 @@ impl PyScene {
 impl PyScene {
     /// Keys of all parameters, in scene order.
     fn param_keys(&self) -> Vec<String> {
-        self.inner.params.iter().map(|(_, p)| p.key.clone()).collect()
+        self.inner
+            .params
+            .iter()
+            .map(|(_, p)| p.key.clone())
+            .collect()
     }
 
     /// `(shape, differentiable, discontinuous, read_only, domain)` of `key`.
@@ -368,7 +370,11 @@ impl PyScene {
 
     /// Channel names of a primal render.
     #[pyo3(signature = (sensor=0, integrator=None))]
-    fn channel_names(&self, sensor: usize, integrator: Option<PyRef<'_, PyIntegrator>>) -> PyResult<Vec<String>> {
+    fn channel_names(
+        &self,
+        sensor: usize,
+        integrator: Option<PyRef<'_, PyIntegrator>>,
+    ) -> PyResult<Vec<String>> {
         let i = integrator
             .as_ref()
             .map_or(&self.inner.integrator, |i| &i.inner);
@@ -471,8 +477,9 @@ impl PyScene {
         let opts = options(spp, seed, sensor, threads);
         let grads = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             run_detached(py, opts, &progress, |o| {
-                let k: Option<Vec<&str>> =
-                    keys.as_ref().map(|v| v.iter().map(String::as_str).collect());
+                let k: Option<Vec<&str>> = keys
+                    .as_ref()
+                    .map(|v| v.iter().map(String::as_str).collect());
                 render_backward(scene, &d, k.as_deref(), o)
             })
         })?;

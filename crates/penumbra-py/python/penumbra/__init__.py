@@ -21,7 +21,6 @@ functions until boundary terms are implemented.
 from __future__ import annotations
 
 import os
-import shutil
 
 import numpy as np
 
@@ -133,6 +132,8 @@ def load_dict(d: dict):
             raise type(e)(msg) from None
     finally:
         if "d" in state:
+            import shutil
+
             shutil.rmtree(state["d"], ignore_errors=True)
 
 

@@ -22,8 +22,6 @@ from __future__ import annotations
 import numbers
 import os
 import re
-import tempfile
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -51,6 +49,21 @@ for _cls, _names in {
         PLUGIN_CLASS[_n] = _cls
 
 INTEGRATORS = ("path", "direct", "aov")
+
+
+def quoteattr(s):
+    """``s`` as a double-quoted XML attribute value (xml.sax.saxutils
+    would pull in urllib at import time)."""
+    s = (
+        s.replace("&", "&amp;")
+        .replace("<", "&lt;")
+        .replace(">", "&gt;")
+        .replace('"', "&quot;")
+        .replace("\n", "&#10;")
+        .replace("\r", "&#13;")
+        .replace("\t", "&#9;")
+    )
+    return f'"{s}"'
 
 
 def _path_str(path):
@@ -245,6 +258,8 @@ def make_tmpdir_factory():
 
     def get():
         if "d" not in state:
+            import tempfile
+
             state["d"] = tempfile.mkdtemp(prefix="penumbra-dict-")
         return state["d"]
 
