@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# Runs every test of the project: formatting, lints, and the Rust test suite
-# (unit tests, reference-scene comparisons, bad-input corpus, CLI).
+# Runs every test of the project: formatting, lints, the Rust test suite
+# (unit tests, reference-scene comparisons, gradient checks, bad-input
+# corpus, CLI), then the Python package's tests (wheel built into a
+# virtualenv, pytest, example loops).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --release -- -D warnings
 cargo test --workspace --release
+./scripts/test_python.sh
