@@ -141,15 +141,27 @@ impl ImageBlock {
         if i1 < i0 {
             return;
         }
-        // column weights, cached for footprints up to 16 pixels wide
+        // row and column weights, evaluated once per sample for
+        // footprints up to 16 pixels wide
         const CACHE: usize = 16;
         let nx = (i1 - i0 + 1) as usize;
-        let mut wx = [0.0f32; CACHE];
-        let cached = nx <= CACHE;
-        if cached {
-            for (k, w) in wx[..nx].iter_mut().enumerate() {
-                *w = filter.eval((i0 + k as i64) as f32 + 0.5 - px);
+        let ny = (j1 - j0 + 1).max(0) as usize;
+        if nx <= CACHE && ny <= CACHE {
+            let (mut wx, mut wy) = ([0.0f32; CACHE], [0.0f32; CACHE]);
+            filter.eval_span(i0, px, &mut wx[..nx]);
+            filter.eval_span(j0, py, &mut wy[..ny]);
+            for (j, &ey) in (j0..=j1).zip(&wy[..ny]) {
+                if ey == 0.0 {
+                    continue;
+                }
+                for (i, &ex) in (i0..=i1).zip(&wx[..nx]) {
+                    let w = (ey * ex) as f64;
+                    if w != 0.0 {
+                        f(i, j, w);
+                    }
+                }
             }
+            return;
         }
         for j in j0..=j1 {
             let wy = filter.eval(j as f32 + 0.5 - py);
@@ -157,12 +169,7 @@ impl ImageBlock {
                 continue;
             }
             for i in i0..=i1 {
-                let ex = if cached {
-                    wx[(i - i0) as usize]
-                } else {
-                    filter.eval(i as f32 + 0.5 - px)
-                };
-                let w = (wy * ex) as f64;
+                let w = (wy * filter.eval(i as f32 + 0.5 - px)) as f64;
                 if w != 0.0 {
                     f(i, j, w);
                 }

@@ -63,7 +63,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
     let n = names.len();
     if alpha {
         if n > 64 {
-            return Err(Error::Invalid("an rgba film supports at most 64 channels".into()));
+            return Err(Error::Invalid(
+                "an rgba film supports at most 64 channels".into(),
+            ));
         }
         names.insert(3.min(n), "A".into());
     }
@@ -75,7 +77,11 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
             integrator.sample(scene, ray, rng, rest);
             let k = 3.min(n);
             out[..k].copy_from_slice(&rest[..k]);
-            out[k] = if scene.intersect(&ray).is_some() { 1.0 } else { 0.0 };
+            out[k] = if scene.intersect(&ray).is_some() {
+                1.0
+            } else {
+                0.0
+            };
             out[k + 1..].copy_from_slice(&rest[k..]);
         } else {
             integrator.sample(scene, ray, rng, out)
