@@ -1,15 +1,18 @@
-//! The acceleration structure: one compressed wide BVH (CWBVH, Ylitie et
-//! al. 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed
-//! Wide BVHs"; built by PLOC with reinsertion, via the `obvhs` crate) over
-//! all primitives of all shapes: every triangle of every mesh, and one
-//! primitive per analytic shape (sphere, disk).
+//! The acceleration structure: a 4-wide BVH over all primitives of all
+//! shapes (every triangle of every mesh, and one primitive per analytic
+//! shape: sphere, disk), laid out for SIMD traversal on the CPU in the
+//! manner of Embree (Wald et al. 2014, "Embree: A Kernel Framework for
+//! Efficient CPU Ray Tracing"): each node holds the boxes of its four
+//! children as structure-of-arrays, tested against one ray at once, and
+//! each leaf holds up to four triangles as one packet (`v0`, `e1 = v0 -
+//! v1`, `e2 = v2 - v0`, `ng = e1 × e2` per lane), also tested at once.
 //!
-//! Triangle data for traversal is stored in BVH primitive order in one
-//! compact array (`v0`, `v0 - v1`, `v2 - v0`, their cross product: 64
-//! bytes, one cache line each), so the hot loop has no indirection.
-//! Triangles are two-sided (no backface culling). Analytic primitives sit
-//! in the same array as a sentinel (zero edges, index in `v0.x`) handled
-//! off the hot path.
+//! The tree is built as a binary BVH by PLOC with reinsertion (the `obvhs`
+//! crate), then collapsed to four-wide nodes (opening the child of largest
+//! surface area until four children are gathered; subtrees of at most four
+//! primitives become leaves). Triangles are two-sided (no backface
+//! culling). Analytic primitives sit in the packets as lanes flagged in a
+//! mask (zero edges), handled off the hot path.
 //!
 //! After vertex positions (or sphere/disk parameters) change, [`Accel::update`]
 //! refits the binary BVH kept from the build (same topology, new boxes) and
@@ -19,46 +22,13 @@ use crate::geometry::shapes::disk::DiskFrame;
 use crate::geometry::shapes::{Disk, Sphere};
 use crate::geometry::{Hit, Ray, Shape};
 use crate::params::ParamStore;
-use glam::{UVec2, Vec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
-use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
-use obvhs::cwbvh::node::{extract_byte64, CwBvhNode};
-use obvhs::cwbvh::CwBvh;
 use obvhs::ploc::PlocBuilder;
 use obvhs::BvhBuildParams;
-
-/// A triangle laid out for intersection (as in madmann91's `bvh` library):
-/// `e1 = v0 - v1`, `e2 = v2 - v0`, `ng = e1 × e2`.
-#[derive(Clone, Copy, Debug, Default)]
-#[repr(C)]
-struct PackedTri {
-    v0: Vec3A,
-    e1: Vec3A,
-    e2: Vec3A,
-    ng: Vec3A,
-}
-
-impl PackedTri {
-    fn new(p0: Vec3, p1: Vec3, p2: Vec3) -> PackedTri {
-        let (v0, v1, v2) = (Vec3A::from(p0), Vec3A::from(p1), Vec3A::from(p2));
-        let e1 = v0 - v1;
-        let e2 = v2 - v0;
-        PackedTri {
-            v0,
-            e1,
-            e2,
-            ng: e1.cross(e2),
-        }
-    }
-    fn analytic(index: u32) -> PackedTri {
-        PackedTri {
-            v0: Vec3A::new(f32::from_bits(index), 0.0, 0.0),
-            ..Default::default()
-        }
-    }
-}
+use std::mem::MaybeUninit;
 
 #[derive(Clone, Copy, Debug)]
 enum Analytic {
@@ -85,86 +55,284 @@ impl Analytic {
     }
 }
 
-/// Which of the (up to) eight children of a CWBVH node the ray overlaps
-/// on `[ray.tmin, ray.tmax]`, as the hit mask the `obvhs::traverse!` loop
-/// expects (child-node bits in the high byte, leaf-primitive bits below).
-///
-/// Same semantics as obvhs' `CwBvhNode::intersect_ray`, but the eight
-/// quantised child planes per axis are widened from bytes to floats with
-/// SSE2 unpacks instead of scalar conversions, near/far planes are chosen
-/// once per axis, and the ray's own `tmin` is honoured.
-#[inline(always)]
-fn intersect_node(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_inv4: u32) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::*;
-        let e = node.compute_extent();
-        let inv = e * ray.inv_direction;
-        let org = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
-        let d = ray.direction;
-        let pick = |neg: bool, lo: &[u8; 8], hi: &[u8; 8]| -> ([u8; 8], [u8; 8]) {
-            if neg {
-                (*hi, *lo)
-            } else {
-                (*lo, *hi)
-            }
-        };
-        let (xn, xf) = pick(d.x < 0.0, &node.child_min_x, &node.child_max_x);
-        let (yn, yf) = pick(d.y < 0.0, &node.child_min_y, &node.child_max_y);
-        let (zn, zf) = pick(d.z < 0.0, &node.child_min_z, &node.child_max_z);
-        // SAFETY: SSE2 is part of the x86_64 baseline; the loads read 8
-        // bytes from 8-byte arrays.
-        let mask = unsafe {
-            #[inline(always)]
-            unsafe fn widen(v: &[u8; 8]) -> (__m128, __m128) {
-                let z = _mm_setzero_si128();
-                let b = _mm_loadl_epi64(v.as_ptr() as *const __m128i);
-                let w = _mm_unpacklo_epi8(b, z);
-                (
-                    _mm_cvtepi32_ps(_mm_unpacklo_epi16(w, z)),
-                    _mm_cvtepi32_ps(_mm_unpackhi_epi16(w, z)),
-                )
-            }
-            let (ix, iy, iz) = (_mm_set1_ps(inv.x), _mm_set1_ps(inv.y), _mm_set1_ps(inv.z));
-            let (ox, oy, oz) = (_mm_set1_ps(org.x), _mm_set1_ps(org.y), _mm_set1_ps(org.z));
-            let slab = |q: __m128, i: __m128, o: __m128| _mm_add_ps(_mm_mul_ps(q, i), o);
-            let (xn0, xn1) = widen(&xn);
-            let (xf0, xf1) = widen(&xf);
-            let (yn0, yn1) = widen(&yn);
-            let (yf0, yf1) = widen(&yf);
-            let (zn0, zn1) = widen(&zn);
-            let (zf0, zf1) = widen(&zf);
-            let tmin_r = _mm_set1_ps(ray.tmin);
-            let tmax_r = _mm_set1_ps(ray.tmax);
-            let near = |x: __m128, y: __m128, z: __m128| {
-                _mm_max_ps(
-                    _mm_max_ps(slab(x, ix, ox), slab(y, iy, oy)),
-                    _mm_max_ps(slab(z, iz, oz), tmin_r),
-                )
-            };
-            let far = |x: __m128, y: __m128, z: __m128| {
-                _mm_min_ps(
-                    _mm_min_ps(slab(x, ix, ox), slab(y, iy, oy)),
-                    _mm_min_ps(slab(z, iz, oz), tmax_r),
-                )
-            };
-            let m0 = _mm_movemask_ps(_mm_cmple_ps(near(xn0, yn0, zn0), far(xf0, yf0, zf0)));
-            let m1 = _mm_movemask_ps(_mm_cmple_ps(near(xn1, yn1, zn1), far(xf1, yf1, zf1)));
-            (m0 | (m1 << 4)) as u32
-        };
-        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-        let mut hit_mask = 0u32;
-        let mut m = mask;
-        while m != 0 {
-            let j = m.trailing_zeros() as usize;
-            m &= m - 1;
-            hit_mask |= extract_byte64(child_bits8, j) << extract_byte64(bit_index8, j);
+/// Child slot marker: the child is a leaf (index of its first packet in
+/// the low bits).
+const LEAF: u32 = 0x8000_0000;
+/// Child slot marker: no child (its box is empty and never hit).
+const EMPTY: u32 = u32::MAX;
+/// Subtrees with at most this many primitives become one leaf.
+const LEAF_SIZE: u32 = 4;
+/// Traversal stack entries kept on the machine stack; deeper trees use a
+/// heap stack (see [`Accel::stack_size`]).
+const STACK: usize = 96;
+
+/// A 4-wide BVH node: the boxes of its four children as structure of
+/// arrays (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child)
+/// and the children (node index, `LEAF | packet index`, or `EMPTY`).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Node4 {
+    b: [[Vec4; 3]; 2],
+    child: [u32; 4],
+}
+
+/// Up to four primitives of a leaf, laid out for one SIMD intersection
+/// test (as in madmann91's `bvh` library, per lane: `v0`, `e1 = v0 - v1`,
+/// `e2 = v2 - v0`, `ng = e1 × e2`). Unused and analytic lanes have zero
+/// edges, so the triangle test never reports them.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Tri4 {
+    v0: [Vec4; 3],
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+    ng: [Vec4; 3],
+    /// Per lane: index of the primitive in build order (`Accel::prims`).
+    id: [u32; 4],
+    /// Lanes (bit k: lane k) holding analytic primitives.
+    analytic: u32,
+    /// Another packet of the same leaf follows this one.
+    more: bool,
+}
+
+/// The ray as traversal uses it: splatted origin and inverse direction,
+/// and which box side (min/max) is the near one per axis.
+struct TRay {
+    o: [Vec4; 3],
+    d: [Vec4; 3],
+    inv: [Vec4; 3],
+    near: [usize; 3],
+}
+
+impl TRay {
+    #[inline(always)]
+    fn new(ray: &Ray) -> TRay {
+        // -0.0 + 0.0 = +0.0: a zero component inverts to +inf and takes
+        // the min side as near, consistently
+        let d = ray.d + Vec3::ZERO;
+        let inv = d.recip();
+        TRay {
+            o: [
+                Vec4::splat(ray.o.x),
+                Vec4::splat(ray.o.y),
+                Vec4::splat(ray.o.z),
+            ],
+            d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            near: [
+                (inv.x < 0.0) as usize,
+                (inv.y < 0.0) as usize,
+                (inv.z < 0.0) as usize,
+            ],
         }
-        hit_mask
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        node.intersect_ray(ray, oct_inv4)
+
+    /// Which children of `n` the ray overlaps on `[tmin, tmax]` (bit k:
+    /// child k), and the entry distances. Slab distances that are NaN
+    /// (a zero direction component with the origin on a box plane) do not
+    /// constrain the interval; the far distance is widened by a few ulps so
+    /// that rounding cannot miss flat boxes (Ize 2013, "Robust BVH Ray
+    /// Traversal").
+    #[inline(always)]
+    fn hit_node(&self, n: &Node4, tmin: f32, tmax: f32) -> (u32, Vec4) {
+        let slab = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv[a];
+        let [nx, ny, nz] = self.near;
+        // `max(x, acc)`/`min(x, acc)` keep `acc` when x is NaN (SSE order)
+        let t0 = slab(0, nx).max(slab(1, ny).max(slab(2, nz).max(Vec4::splat(tmin))));
+        let t1 = slab(0, 1 - nx).min(slab(1, 1 - ny).min(slab(2, 1 - nz).min(Vec4::splat(tmax))));
+        let t1 = t1 * (1.0 + 4.0 * f32::EPSILON);
+        (t0.cmple(t1).bitmask(), t0)
+    }
+
+    /// The triangle lanes of `p` hit on `(tmin, tmax)`: the lane mask and,
+    /// per lane, the distance and barycentrics `(b1, b2)` (meaningful for
+    /// lanes in the mask). Same arithmetic as a scalar sign-normalised
+    /// Möller–Trumbore test (edge tests before any division, as Embree).
+    #[inline(always)]
+    fn hit_tris(&self, p: &Tri4, tmin: f32, tmax: f32) -> (u32, Vec4, Vec4, Vec4) {
+        let dot = |a: &[Vec4; 3], b: &[Vec4; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let c = [
+            p.v0[0] - self.o[0],
+            p.v0[1] - self.o[1],
+            p.v0[2] - self.o[2],
+        ];
+        let d = &self.d;
+        let den = dot(&p.ng, d);
+        let s = den.signum();
+        let aden = den.abs();
+        // r = d × c
+        let r = [
+            d[1] * c[2] - d[2] * c[1],
+            d[2] * c[0] - d[0] * c[2],
+            d[0] * c[1] - d[1] * c[0],
+        ];
+        let u = dot(&r, &p.e2) * s;
+        let v = dot(&r, &p.e1) * s;
+        let tn = dot(&p.ng, &c) * s;
+        let zero = Vec4::ZERO;
+        let ok = aden.cmpgt(zero)
+            & u.cmpge(zero)
+            & v.cmpge(zero)
+            & (u + v).cmple(aden)
+            & tn.cmpgt(aden * tmin)
+            & tn.cmplt(aden * tmax);
+        let mask = ok.bitmask();
+        if mask == 0 {
+            return (0, zero, zero, zero);
+        }
+        let inv = aden.recip();
+        (mask, tn * inv, u * inv, v * inv)
+    }
+}
+
+/// A traversal stack of `(node, entry distance)` on the machine stack
+/// (with a heap fallback for unusually deep trees).
+struct Stack {
+    buf: [MaybeUninit<(u32, f32)>; STACK],
+    heap: Vec<(u32, f32)>,
+    len: usize,
+    on_heap: bool,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn new(size: usize) -> Stack {
+        let on_heap = size > STACK;
+        Stack {
+            buf: [const { MaybeUninit::uninit() }; STACK],
+            heap: if on_heap {
+                Vec::with_capacity(size)
+            } else {
+                Vec::new()
+            },
+            len: 0,
+            on_heap,
+        }
+    }
+    #[inline(always)]
+    fn push(&mut self, e: (u32, f32)) {
+        if self.on_heap {
+            self.heap.push(e);
+        } else {
+            self.buf[self.len] = MaybeUninit::new(e);
+            self.len += 1;
+        }
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(u32, f32)> {
+        if self.on_heap {
+            return self.heap.pop();
+        }
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: entries below `len` were written by `push`.
+        Some(unsafe { self.buf[self.len].assume_init() })
+    }
+}
+
+/// Collapses the binary BVH `bvh2` into 4-wide nodes and leaf packets.
+struct Collapse<'a> {
+    bvh2: &'a Bvh2,
+    /// Primitives below each binary node.
+    count: Vec<u32>,
+    nodes: Vec<Node4>,
+    leaves: Vec<[u32; 4]>,
+    leaf_more: Vec<bool>,
+    depth: usize,
+}
+
+impl Collapse<'_> {
+    fn count(bvh2: &Bvh2, i: usize, out: &mut [u32]) -> u32 {
+        let n = &bvh2.nodes[i];
+        let c = if n.is_leaf() {
+            n.prim_count
+        } else {
+            let f = n.first_index as usize;
+            Self::count(bvh2, f, out) + Self::count(bvh2, f + 1, out)
+        };
+        out[i] = c;
+        c
+    }
+
+    /// Build-order primitive indices below binary node `i`.
+    fn gather(&self, i: usize, out: &mut Vec<u32>) {
+        let n = &self.bvh2.nodes[i];
+        let f = n.first_index as usize;
+        if n.is_leaf() {
+            out.extend_from_slice(&self.bvh2.primitive_indices[f..f + n.prim_count as usize]);
+        } else {
+            self.gather(f, out);
+            self.gather(f + 1, out);
+        }
+    }
+
+    /// The child slot for binary node `i`: a leaf of packets, or a new
+    /// 4-wide node.
+    fn child(&mut self, i: usize, depth: usize) -> u32 {
+        if self.count[i] <= LEAF_SIZE || self.bvh2.nodes[i].is_leaf() {
+            let mut ids = Vec::new();
+            self.gather(i, &mut ids);
+            let first = self.leaves.len() as u32;
+            for (k, chunk) in ids.chunks(4).enumerate() {
+                let mut lanes = [u32::MAX; 4];
+                lanes[..chunk.len()].copy_from_slice(chunk);
+                if k > 0 {
+                    *self.leaf_more.last_mut().expect("a packet precedes") = true;
+                }
+                self.leaves.push(lanes);
+                self.leaf_more.push(false);
+            }
+            return LEAF | first;
+        }
+        self.node(i, depth)
+    }
+
+    /// A 4-wide node for the interior binary node `i`: opens the child of
+    /// largest surface area until four children are gathered.
+    fn node(&mut self, i: usize, depth: usize) -> u32 {
+        self.depth = self.depth.max(depth + 1);
+        let n = &self.bvh2.nodes[i];
+        let f = n.first_index as usize;
+        let mut kids = vec![f, f + 1];
+        while kids.len() < 4 {
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, &k)| self.count[k] > LEAF_SIZE && !self.bvh2.nodes[k].is_leaf())
+                .max_by(|a, b| {
+                    let sa = self.bvh2.nodes[*a.1].aabb().half_area();
+                    let sb = self.bvh2.nodes[*b.1].aabb().half_area();
+                    sa.total_cmp(&sb)
+                })
+                .map(|(j, _)| j);
+            let Some(j) = open else { break };
+            let k = kids.swap_remove(j);
+            let fk = self.bvh2.nodes[k].first_index as usize;
+            kids.push(fk);
+            kids.push(fk + 1);
+        }
+        let idx = self.nodes.len();
+        self.nodes.push(Node4 {
+            b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
+            child: [EMPTY; 4],
+        });
+        for (slot, &k) in kids.iter().enumerate() {
+            let c = self.child(k, depth + 1);
+            let bb = self.bvh2.nodes[k].aabb();
+            let node = &mut self.nodes[idx];
+            node.child[slot] = c;
+            for a in 0..3 {
+                let mut lo = node.b[0][a].to_array();
+                let mut hi = node.b[1][a].to_array();
+                lo[slot] = bb.min[a];
+                hi[slot] = bb.max[a];
+                node.b[0][a] = Vec4::from_array(lo);
+                node.b[1][a] = Vec4::from_array(hi);
+            }
+        }
+        idx as u32
     }
 }
 
@@ -172,11 +340,12 @@ fn intersect_node(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_inv4: u32) -> u32
 #[derive(Clone, Default)]
 pub struct Accel {
     bvh2: Bvh2,
-    bvh: CwBvh,
-    /// Traversal data, in BVH primitive order.
-    tris: Vec<PackedTri>,
-    /// (shape, primitive) in BVH primitive order.
-    refs: Vec<[u32; 2]>,
+    /// 4-wide nodes; the root is node 0.
+    nodes: Vec<Node4>,
+    /// Leaf packets.
+    tris: Vec<Tri4>,
+    /// Traversal stack size the tree needs.
+    stack_size: usize,
     /// (shape, primitive) in build order.
     prims: Vec<[u32; 2]>,
     analytic: Vec<Analytic>,
@@ -188,7 +357,7 @@ impl std::fmt::Debug for Accel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Accel")
             .field("primitives", &self.prims.len())
-            .field("nodes", &self.bvh.nodes.len())
+            .field("nodes", &self.nodes.len())
             .finish()
     }
 }
@@ -306,25 +475,81 @@ impl Accel {
             .collect()
     }
 
-    /// Derives the wide BVH from the binary one and packs the primitives
-    /// in its order.
+    /// Derives the 4-wide BVH from the binary one and packs the
+    /// primitives of each leaf.
     fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
-        self.bvh = bvh2_to_cwbvh(&self.bvh2, 3, true, false);
-        self.refs = self
-            .bvh
-            .primitive_indices
+        let mut count = vec![0u32; self.bvh2.nodes.len()];
+        Collapse::count(&self.bvh2, 0, &mut count);
+        let mut c = Collapse {
+            bvh2: &self.bvh2,
+            count,
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            leaf_more: Vec::new(),
+            depth: 0,
+        };
+        if self.bvh2.nodes[0].is_leaf() || c.count[0] <= LEAF_SIZE {
+            // a root leaf: one node with one child
+            let leaf = c.child(0, 1);
+            let bb = *self.bvh2.nodes[0].aabb();
+            let mut n = Node4 {
+                b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
+                child: [EMPTY; 4],
+            };
+            n.child[0] = leaf;
+            for a in 0..3 {
+                n.b[0][a].x = bb.min[a];
+                n.b[1][a].x = bb.max[a];
+            }
+            c.nodes.push(n);
+            c.depth = 1;
+        } else {
+            c.node(0, 0);
+        }
+        // each level pushes at most three entries
+        self.stack_size = 3 * c.depth + 2;
+        self.nodes = c.nodes;
+        let (leaves, more) = (c.leaves, c.leaf_more);
+        self.tris = leaves
             .iter()
-            .map(|&i| self.prims[i as usize])
-            .collect();
-        self.tris = self
-            .refs
-            .iter()
-            .map(|&[s, p]| match &shapes[s as usize] {
-                Shape::Mesh(m) => {
-                    let [p0, p1, p2] = m.triangle(store, p as usize);
-                    PackedTri::new(p0, p1, p2)
+            .zip(more)
+            .map(|(ids, more)| {
+                let mut lanes = [[Vec3::ZERO; 4]; 4];
+                let mut analytic = 0u32;
+                for (k, &id) in ids.iter().enumerate() {
+                    if id == u32::MAX {
+                        continue;
+                    }
+                    let [s, p] = self.prims[id as usize];
+                    match &shapes[s as usize] {
+                        Shape::Mesh(m) => {
+                            let [p0, p1, p2] = m.triangle(store, p as usize);
+                            let (e1, e2) = (p0 - p1, p2 - p0);
+                            lanes[k] = [p0, e1, e2, e1.cross(e2)];
+                        }
+                        _ => analytic |= 1 << k,
+                    }
                 }
-                _ => PackedTri::analytic(self.analytic_of_shape[s as usize]),
+                let soa = |f: usize| {
+                    let axis = |a: usize| {
+                        Vec4::new(
+                            lanes[0][f][a],
+                            lanes[1][f][a],
+                            lanes[2][f][a],
+                            lanes[3][f][a],
+                        )
+                    };
+                    [axis(0), axis(1), axis(2)]
+                };
+                Tri4 {
+                    v0: soa(0),
+                    e1: soa(1),
+                    e2: soa(2),
+                    ng: soa(3),
+                    id: *ids,
+                    analytic,
+                    more,
+                }
             })
             .collect();
     }
@@ -334,78 +559,112 @@ impl Accel {
         self.prims.len()
     }
 
-    /// The traversal ray. Negative zeros in the direction are made
-    /// positive (`-0.0 + 0.0 = +0.0`): obvhs picks slab sides with `d < 0`
-    /// but inverts `-0.0` to a negative number, which would make
-    /// axis-aligned rays miss.
-    #[inline(always)]
-    fn bvh_ray(ray: &Ray) -> obvhs::ray::Ray {
-        let d = Vec3A::from(ray.d) + Vec3A::ZERO;
-        obvhs::ray::Ray::new(ray.o.into(), d, ray.tmin, ray.tmax)
+    /// The analytic primitive of packet lane `id` (a build-order index).
+    #[inline(never)]
+    fn analytic_hit(&self, id: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
+        let s = self.prims[id as usize][0];
+        let a = &self.analytic[self.analytic_of_shape[s as usize] as usize];
+        a.intersect(ray.o, ray.d, tmin, tmax)
     }
 
     /// The closest hit on the open interval `(ray.tmin, ray.tmax)`.
     /// For triangles, `Hit::uv` holds the barycentrics `(b1, b2)` of
     /// `p = (1 - b1 - b2) p0 + b1 p1 + b2 p2`.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        if self.bvh.nodes.is_empty() {
+        if self.nodes.is_empty() {
             return None;
         }
-        let mut bray = Self::bvh_ray(ray);
-        let o = bray.origin;
-        let d = bray.direction;
+        let tr = TRay::new(ray);
+        let tmin = ray.tmin;
+        let mut tmax = ray.tmax;
         let mut best = u32::MAX;
         let (mut bu, mut bv) = (0.0f32, 0.0f32);
-        let tris = &self.tris[..];
-        let mut state = self.bvh.new_traversal(d);
-        let mut node;
-        obvhs::traverse!(
-            self.bvh,
-            node,
-            state,
-            intersect_node(node, &bray, state.oct_inv4),
-            {
-                let id = state.primitive_id as usize;
-                let tri = &tris[id];
-                let c = tri.v0 - o;
-                let den = tri.ng.dot(d);
-                if den != 0.0 {
-                    // sign-normalised edge tests before any division
-                    // (as Embree's Möller–Trumbore intersector)
-                    let sgn = den.to_bits() & 0x8000_0000;
-                    let flip = |x: f32| f32::from_bits(x.to_bits() ^ sgn);
-                    let aden = den.abs();
-                    let r = d.cross(c);
-                    let u = flip(r.dot(tri.e2));
-                    let v = flip(r.dot(tri.e1));
-                    if u >= 0.0 && v >= 0.0 && u + v <= aden {
-                        let tn = flip(tri.ng.dot(c));
-                        if tn > bray.tmin * aden && tn < bray.tmax * aden {
-                            let inv = 1.0 / aden;
-                            bray.tmax = tn * inv;
-                            best = id as u32;
-                            bu = u * inv;
-                            bv = v * inv;
+        let mut stack = Stack::new(self.stack_size);
+        stack.push((0, tmin));
+        while let Some((mut cur, t_enter)) = stack.pop() {
+            if t_enter > tmax {
+                continue;
+            }
+            // descend, nearest child first, the others onto the stack
+            while cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (mask, t0) = tr.hit_node(n, tmin, tmax);
+                if mask == 0 {
+                    cur = EMPTY;
+                    break;
+                }
+                let first = mask.trailing_zeros() as usize;
+                if mask & (mask - 1) == 0 {
+                    cur = n.child[first];
+                    continue;
+                }
+                let t0 = t0.to_array();
+                let mut hits = [(0u32, 0f32); 4];
+                let mut k = 0;
+                let mut m = mask;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    // insertion by decreasing entry distance
+                    let e = (n.child[j], t0[j]);
+                    let mut q = k;
+                    while q > 0 && hits[q - 1].1 < e.1 {
+                        hits[q] = hits[q - 1];
+                        q -= 1;
+                    }
+                    hits[q] = e;
+                    k += 1;
+                }
+                for &h in &hits[..k - 1] {
+                    stack.push(h);
+                }
+                cur = hits[k - 1].0;
+            }
+            if cur == EMPTY {
+                continue;
+            }
+            let mut pi = (cur & !LEAF) as usize;
+            loop {
+                let p = &self.tris[pi];
+                let (mask, t, u, v) = tr.hit_tris(p, tmin, tmax);
+                if mask != 0 {
+                    let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                    let mut m = mask;
+                    while m != 0 {
+                        let j = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        if t[j] < tmax {
+                            tmax = t[j];
+                            best = p.id[j];
+                            bu = u[j];
+                            bv = v[j];
                         }
                     }
-                } else if tri.ng == Vec3A::ZERO {
-                    let a = &self.analytic[tri.v0.x.to_bits() as usize];
-                    let t = a.intersect(ray.o, ray.d, bray.tmin, bray.tmax);
-                    if t < bray.tmax {
-                        bray.tmax = t;
-                        best = id as u32;
+                }
+                let mut m = p.analytic;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let t = self.analytic_hit(p.id[j], ray, tmin, tmax);
+                    if t < tmax {
+                        tmax = t;
+                        best = p.id[j];
                         bu = 0.0;
                         bv = 0.0;
                     }
                 }
+                if !p.more {
+                    break;
+                }
+                pi += 1;
             }
-        );
+        }
         if best == u32::MAX {
             return None;
         }
-        let [shape, prim] = self.refs[best as usize];
+        let [shape, prim] = self.prims[best as usize];
         Some(Hit {
-            t: bray.tmax,
+            t: tmax,
             shape,
             prim,
             uv: Vec2::new(bu, bv),
@@ -415,51 +674,54 @@ impl Accel {
     /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
     /// rays): stops at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        if self.bvh.nodes.is_empty() {
+        if self.nodes.is_empty() {
             return false;
         }
-        let bray = Self::bvh_ray(ray);
-        let o = bray.origin;
-        let d = bray.direction;
-        let tris = &self.tris[..];
-        let mut state = self.bvh.new_traversal(d);
-        let mut node;
-        let mut hit = false;
-        'outer: {
-            obvhs::traverse!(
-                self.bvh,
-                node,
-                state,
-                intersect_node(node, &bray, state.oct_inv4),
-                {
-                    let tri = &tris[state.primitive_id as usize];
-                    let c = tri.v0 - o;
-                    let den = tri.ng.dot(d);
-                    if den != 0.0 {
-                        let sgn = den.to_bits() & 0x8000_0000;
-                        let flip = |x: f32| f32::from_bits(x.to_bits() ^ sgn);
-                        let aden = den.abs();
-                        let r = d.cross(c);
-                        let u = flip(r.dot(tri.e2));
-                        let v = flip(r.dot(tri.e1));
-                        if u >= 0.0 && v >= 0.0 && u + v <= aden {
-                            let tn = flip(tri.ng.dot(c));
-                            if tn > bray.tmin * aden && tn < bray.tmax * aden {
-                                hit = true;
-                                break 'outer;
-                            }
-                        }
-                    } else if tri.ng == Vec3A::ZERO {
-                        let a = &self.analytic[tri.v0.x.to_bits() as usize];
-                        if a.intersect(ray.o, ray.d, bray.tmin, bray.tmax) < bray.tmax {
-                            hit = true;
-                            break 'outer;
-                        }
+        let tr = TRay::new(ray);
+        let (tmin, tmax) = (ray.tmin, ray.tmax);
+        let mut stack = Stack::new(self.stack_size);
+        stack.push((0, tmin));
+        while let Some((mut cur, _)) = stack.pop() {
+            while cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (mut mask, _) = tr.hit_node(n, tmin, tmax);
+                if mask == 0 {
+                    cur = EMPTY;
+                    break;
+                }
+                let j = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                while mask != 0 {
+                    let q = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    stack.push((n.child[q], 0.0));
+                }
+                cur = n.child[j];
+            }
+            if cur == EMPTY {
+                continue;
+            }
+            let mut pi = (cur & !LEAF) as usize;
+            loop {
+                let p = &self.tris[pi];
+                if tr.hit_tris(p, tmin, tmax).0 != 0 {
+                    return true;
+                }
+                let mut m = p.analytic;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if self.analytic_hit(p.id[j], ray, tmin, tmax) < tmax {
+                        return true;
                     }
                 }
-            );
+                if !p.more {
+                    break;
+                }
+                pi += 1;
+            }
         }
-        hit
+        false
     }
 }
 

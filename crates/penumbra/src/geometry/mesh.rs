@@ -53,6 +53,10 @@ pub struct Mesh {
     /// Triangle selection by area for [`ShapeT::sample_position`].
     area_distr: DiscreteDistribution,
     area: f32,
+    /// Unit geometric normal per face (flipped with `flip_normals`),
+    /// derived from the positions with the area table (f32, not
+    /// differentiated: used by position sampling).
+    face_n: Vec<Vec3>,
 }
 
 impl Mesh {
@@ -199,6 +203,7 @@ impl Mesh {
             flip_normals: opts.flip_normals,
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
+            face_n: Vec::new(),
         };
         mesh.update_areas(store)?;
         Ok(mesh)
@@ -239,6 +244,9 @@ impl Mesh {
                 let [p0, p1, p2] = self.triangle(store, f);
                 0.5 * (p1 - p0).cross(p2 - p0).length()
             })
+            .collect();
+        self.face_n = (0..self.faces.len())
+            .map(|f| self.face_normal(store, f))
             .collect();
         self.area_distr = DiscreteDistribution::new(&areas).ok_or_else(|| {
             Error::Invalid(format!("{}: the mesh has zero total area", self.source))
@@ -402,7 +410,7 @@ impl ShapeT for Mesh {
         };
         PositionSample {
             p,
-            n: self.face_normal(store, f),
+            n: self.face_n[f],
             uv,
             pdf: 1.0 / self.area,
             prim: f as u32,

@@ -115,14 +115,54 @@ impl ImageBlock {
         filter: &ReconstructionFilter,
         px: f32,
         py: f32,
+        f: impl FnMut(i64, i64, f64),
+    ) {
+        let bounds = (self.x0, self.y0, self.width as i64, self.height as i64);
+        Self::footprint_in(bounds, filter, px, py, f);
+    }
+
+    /// [`ImageBlock::footprint`] over the block `(x0, y0, width, height)`.
+    /// The separable filter is evaluated once per column and once per row
+    /// (not once per pixel).
+    #[inline(always)]
+    fn footprint_in(
+        (x0, y0, width, height): (i64, i64, i64, i64),
+        filter: &ReconstructionFilter,
+        px: f32,
+        py: f32,
         mut f: impl FnMut(i64, i64, f64),
     ) {
         let r = filter.radius();
         // pixels whose centre (i + 0.5) is within r of px
-        let i0 = ((px - 0.5 - r).ceil() as i64).max(self.x0);
-        let i1 = ((px - 0.5 + r).floor() as i64).min(self.x0 + self.width as i64 - 1);
-        let j0 = ((py - 0.5 - r).ceil() as i64).max(self.y0);
-        let j1 = ((py - 0.5 + r).floor() as i64).min(self.y0 + self.height as i64 - 1);
+        let i0 = ((px - 0.5 - r).ceil() as i64).max(x0);
+        let i1 = ((px - 0.5 + r).floor() as i64).min(x0 + width - 1);
+        let j0 = ((py - 0.5 - r).ceil() as i64).max(y0);
+        let j1 = ((py - 0.5 + r).floor() as i64).min(y0 + height - 1);
+        if i1 < i0 {
+            return;
+        }
+        // row and column weights, evaluated once per sample for
+        // footprints up to 16 pixels wide
+        const CACHE: usize = 16;
+        let nx = (i1 - i0 + 1) as usize;
+        let ny = (j1 - j0 + 1).max(0) as usize;
+        if nx <= CACHE && ny <= CACHE {
+            let (mut wx, mut wy) = ([0.0f32; CACHE], [0.0f32; CACHE]);
+            filter.eval_span(i0, px, &mut wx[..nx]);
+            filter.eval_span(j0, py, &mut wy[..ny]);
+            for (j, &ey) in (j0..=j1).zip(&wy[..ny]) {
+                if ey == 0.0 {
+                    continue;
+                }
+                for (i, &ex) in (i0..=i1).zip(&wx[..nx]) {
+                    let w = (ey * ex) as f64;
+                    if w != 0.0 {
+                        f(i, j, w);
+                    }
+                }
+            }
+            return;
+        }
         for j in j0..=j1 {
             let wy = filter.eval(j as f32 + 0.5 - py);
             if wy == 0.0 {
@@ -149,37 +189,18 @@ impl ImageBlock {
     pub fn put(&mut self, filter: &ReconstructionFilter, px: f32, py: f32, values: &[f32]) {
         debug_assert_eq!(values.len(), self.channels);
         let c = self.channels;
-        let mut hits = [(0i64, 0i64, 0f64); 32];
-        let mut n = 0;
-        // collect first: the footprint borrows the block immutably
-        self.footprint(filter, px, py, |i, j, w| {
-            if n < hits.len() {
-                hits[n] = (i, j, w);
+        let stride = c + 1;
+        let (x0, y0, width) = (self.x0, self.y0, self.width);
+        let bounds = (x0, y0, width as i64, self.height as i64);
+        let data = &mut self.data[..];
+        Self::footprint_in(bounds, filter, px, py, |i, j, w| {
+            let o = (((j - y0) as usize) * width + (i - x0) as usize) * stride;
+            let px = &mut data[o..o + stride];
+            for (acc, v) in px.iter_mut().zip(values) {
+                *acc += w * *v as f64;
             }
-            n += 1;
+            px[c] += w;
         });
-        if n > hits.len() {
-            // a filter wider than 32 pixels: fall back to a heap list
-            let mut all = Vec::with_capacity(n);
-            self.footprint(filter, px, py, |i, j, w| all.push((i, j, w)));
-            for (i, j, w) in all {
-                self.add_weighted(i, j, w, values, c);
-            }
-            return;
-        }
-        for &(i, j, w) in &hits[..n] {
-            self.add_weighted(i, j, w, values, c);
-        }
-    }
-
-    #[inline(always)]
-    fn add_weighted(&mut self, i: i64, j: i64, w: f64, values: &[f32], c: usize) {
-        let o = self.offset(i, j);
-        let px = &mut self.data[o..o + c + 1];
-        for (acc, v) in px.iter_mut().zip(values) {
-            *acc += w * *v as f64;
-        }
-        px[c] += w;
     }
 
     /// The adjoint of splatting then developing: for a sample at `(px, py)`,

@@ -68,9 +68,69 @@ impl ReconstructionFilter {
         }
     }
 
+    /// The 1D filter at the centres of pixels `first, first + 1, …` (one
+    /// per element of `out`) seen from position `c`, i.e. at offsets
+    /// `(first + k) + 0.5 - c`: the same values as
+    /// [`ReconstructionFilter::eval`], with the per-filter constants
+    /// computed once.
+    #[inline]
+    pub fn eval_span(&self, first: i64, c: f32, out: &mut [f32]) {
+        match self {
+            ReconstructionFilter::Gaussian { stddev, radius } => {
+                let alpha = -1.0 / (2.0 * stddev * stddev);
+                let cut = (alpha * radius * radius).exp();
+                for (k, o) in out.iter_mut().enumerate() {
+                    let x = (first + k as i64) as f32 + 0.5 - c;
+                    *o = ((alpha * x * x).exp() - cut).max(0.0);
+                }
+            }
+            _ => {
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = self.eval((first + k as i64) as f32 + 0.5 - c);
+                }
+            }
+        }
+    }
+
     /// Pixels (beyond a sample's own) that one sample can reach on each
     /// side: `ceil(radius - 0.5)`.
     pub fn border(&self) -> usize {
         (self.radius() - 0.5).max(0.0).ceil() as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eval_span_equals_eval_exactly() {
+        let filters = [
+            ReconstructionFilter::Box,
+            ReconstructionFilter::Tent { radius: 1.5 },
+            ReconstructionFilter::Gaussian {
+                stddev: 0.5,
+                radius: 2.0,
+            },
+            ReconstructionFilter::Gaussian {
+                stddev: 1.3,
+                radius: 5.2,
+            },
+        ];
+        for f in &filters {
+            for (first, c) in [(-3i64, -1.37f32), (10, 12.01), (254, 255.999), (0, 0.5)] {
+                let mut out = [0.0f32; 9];
+                f.eval_span(first, c, &mut out);
+                for (k, &v) in out.iter().enumerate() {
+                    let want = f.eval((first + k as i64) as f32 + 0.5 - c);
+                    assert_eq!(
+                        v.to_bits(),
+                        want.to_bits(),
+                        "{f:?} at pixel {}",
+                        first + k as i64
+                    );
+                }
+            }
+        }
     }
 }
