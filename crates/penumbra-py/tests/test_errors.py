@@ -190,7 +190,10 @@ def test_ctrl_c_stops_a_long_render():
     stops after the tiles in flight."""
     code = textwrap.dedent(
         f"""
-        import sys, penumbra as pn
+        import signal, sys, penumbra as pn
+        # a process started in the background inherits SIGINT as ignored,
+        # and Python then installs no handler: restore the usual one
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         s = pn.load_file({str(CBOX)!r}, res=512)
         print("started", flush=True)
         try:
