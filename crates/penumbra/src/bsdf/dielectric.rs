@@ -43,31 +43,6 @@ impl Dielectric {
     }
 }
 
-/// Samples the delta reflection / refraction of a smooth interface with
-/// relative index `eta` (`dielectric`). `weight` is the lobe's R-valued
-/// Fresnel term (times the optional factors) over its primal selection
-/// probability; refracted radiance carries the `η_ti²` scaling.
-pub(crate) fn sample_smooth_interface<R: Real>(
-    store: &ParamStore,
-    si: &SurfaceInteraction<R>,
-    eta: R,
-    refl: &Option<Texture>,
-    trans: &Option<Texture>,
-    u1: f32,
-) -> Option<BsdfSample<R>> {
-    let wi = si.wi.val();
-    if wi.z == 0.0 {
-        return None;
-    }
-    let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
-    let eti = eta_ti.val();
-    let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
-    // radiance is scaled by η_ti² crossing the interface
-    let value = (-f + 1.0) * eta_ti * eta_ti;
-    let transmitted = (wo, value, eta_it.val(), BsdfFlags::DELTA_TRANSMISSION);
-    sample_reflect_or_transmit(store, si, f, refl, trans, u1, transmitted)
-}
-
 impl BsdfT for Dielectric {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DELTA_REFLECTION
@@ -87,14 +62,24 @@ impl BsdfT for Dielectric {
         u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
+        let wi = si.wi.val();
+        if wi.z == 0.0 {
+            return None;
+        }
         let eta = store.read::<R>(self.eta, 0);
-        sample_smooth_interface(
+        let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
+        let eti = eta_ti.val();
+        let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
+        // radiance is scaled by η_ti² crossing the interface
+        let value = (-f + 1.0) * eta_ti * eta_ti;
+        sample_reflect_or_transmit(
             store,
             si,
-            eta,
+            f,
             &self.specular_reflectance,
             &self.specular_transmittance,
             u1,
+            (wo, value, eta_it.val(), BsdfFlags::DELTA_TRANSMISSION),
         )
     }
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {

@@ -206,17 +206,7 @@ mod tests {
             ],
         ];
         let wis = [dir(0.9, 0.2), dir(0.1, 1.0)];
-        for c in &cases {
-            let (b, store) = build("plastic", c);
-            check_smooth(&b, &store, &wis, cases.len());
-            for wi in wis {
-                let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 2);
-                assert!(
-                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
-                    "{a} ± {se}"
-                );
-            }
-        }
+        check_sampling_and_albedo("plastic", &cases, &wis, 2);
         // specular lobe: mirror direction, weight = F / P(specular)
         let (b, store) = build("plastic", &[]);
         let wi = dir(0.5, 0.3);

@@ -354,17 +354,7 @@ mod tests {
             vec![("alpha", float(0.4)), ("nonlinear", boolean(true))],
         ];
         let wis = [dir(0.85, 0.2), dir(0.15, 1.5)];
-        for c in &cases {
-            let (b, store) = build("roughplastic", c);
-            check_smooth(&b, &store, &wis, cases.len());
-            for wi in wis {
-                let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 4);
-                assert!(
-                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
-                    "{a} ± {se}"
-                );
-            }
-        }
+        check_sampling_and_albedo("roughplastic", &cases, &wis, 4);
     }
 
     /// Values of Mitsuba 3.9.1 (scalar_rgb) roughplastic `eval` / `pdf` for

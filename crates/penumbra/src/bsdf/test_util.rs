@@ -256,3 +256,25 @@ pub fn check_energy(
     assert!((a.x - q.x).abs() <= 4.0 * se.x + 5e-3, "{msg}");
     (a.x, msg)
 }
+
+/// For each property set of `plugin`: [`check_smooth`] at `wis`, and the
+/// sampled albedo (20 000 samples from `seed`) at each of `wis` at most 1
+/// within 4 standard errors in every channel.
+pub fn check_sampling_and_albedo(
+    plugin: &str,
+    cases: &[Vec<(&str, Value)>],
+    wis: &[Vec3],
+    seed: u64,
+) {
+    for c in cases {
+        let (b, store) = build(plugin, c);
+        check_smooth(&b, &store, wis, cases.len());
+        for &wi in wis {
+            let (a, se) = albedo_estimate(&b, &store, wi, 20_000, seed);
+            assert!(
+                a.max_element() <= 1.0 + 4.0 * se.max_element(),
+                "{a} ± {se}"
+            );
+        }
+    }
+}
