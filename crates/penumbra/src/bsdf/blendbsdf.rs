@@ -1,6 +1,8 @@
 //! `blendbsdf`: a linear blend of two BSDFs, `(1 − w) f0 + w f1`.
 
-use super::{nested_bsdfs, Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    chosen_with, nested_bsdfs, reuse_uniform, smooth_sample, Bsdf, BsdfFlags, BsdfSample, BsdfT,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -90,31 +92,20 @@ impl BsdfT for BlendBsdf {
     ) -> Option<BsdfSample<R>> {
         let w_r = self.w(store, si);
         let w = w_r.val();
-        let (idx, prob, prob_r, u1) = if u1 >= w {
-            (
-                0,
-                1.0 - w,
-                -w_r + 1.0,
-                ((u1 - w) / (1.0 - w)).min(1.0 - f32::EPSILON),
-            )
+        let (idx, start, prob, prob_r) = if u1 >= w {
+            (0, w, 1.0 - w, -w_r + 1.0)
         } else {
-            (1, w, w_r, (u1 / w).min(1.0 - f32::EPSILON))
+            (1, 0.0, w, w_r)
         };
         if !(prob > 0.0) {
             return None;
         }
-        let mut bs = self.bsdfs[idx].sample(store, si, u1, u2)?;
+        let bs = self.bsdfs[idx].sample(store, si, reuse_uniform(u1, start, prob), u2)?;
         if bs.lobe.has(BsdfFlags::DELTA) {
-            bs.pdf *= prob;
-            bs.weight *= prob_r / prob;
+            Some(chosen_with(bs, prob, prob_r))
         } else {
-            bs.pdf = self.pdf(store, si, bs.wo);
-            if !(bs.pdf > 0.0) {
-                return None;
-            }
-            bs.weight = self.eval(store, si, bs.wo).scale(1.0 / bs.pdf);
+            smooth_sample(self, store, si, bs.wo, bs.eta, bs.lobe)
         }
-        Some(bs)
     }
 
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {

@@ -6,7 +6,7 @@ use super::{default_albedo, BsdfFlags, BsdfSample, BsdfT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::{reflect_local, Spectrum, V3};
+use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamStore};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
@@ -128,13 +128,8 @@ impl BsdfT for Conductor {
             return None;
         }
         let f = self.ior.fresnel(store, si, si.wi.z);
-        Some(BsdfSample {
-            wo: reflect_local(si.wi).val(),
-            pdf: 1.0,
-            weight: f.mul_elem(self.specular_reflectance.eval(store, si)),
-            eta: 1.0,
-            lobe: BsdfFlags::DELTA_REFLECTION,
-        })
+        let weight = f.mul_elem(self.specular_reflectance.eval(store, si));
+        Some(BsdfSample::specular_reflection(si.wi.val(), 1.0, weight))
     }
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)

@@ -2,14 +2,17 @@
 //! water): delta reflection and refraction weighted by the Fresnel terms.
 
 use super::fresnel::fresnel_dielectric;
-use super::{default_albedo, eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    default_albedo, eta_props, sample_reflect_or_transmit, scalar_param, specular_factors,
+    BsdfFlags, BsdfSample, BsdfT,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture, TextureT};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Smooth dielectric. Parameters (Mitsuba 3): `int_ior` (default bk7,
@@ -30,75 +33,12 @@ pub struct Dielectric {
 impl Dielectric {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Dielectric> {
         let eta = eta_props(node, 1.5046, 1.000277)?;
+        let eta = scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?;
+        let (specular_reflectance, specular_transmittance) = specular_factors(node, ctx)?;
         Ok(Dielectric {
-            eta: scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?,
-            specular_reflectance: opt_texture(
-                node,
-                "specular_reflectance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            specular_transmittance: opt_texture(
-                node,
-                "specular_transmittance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-        })
-    }
-}
-
-/// Samples the delta reflection / refraction of a smooth interface with
-/// relative index `eta`; shared by `dielectric`. `weight` is the lobe's
-/// R-valued Fresnel term (times the optional tints) over its primal
-/// selection probability.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn sample_smooth_interface<R: Real>(
-    store: &ParamStore,
-    si: &SurfaceInteraction<R>,
-    eta: R,
-    refl: &Option<Texture>,
-    trans: &Option<Texture>,
-    u1: f32,
-) -> Option<BsdfSample<R>> {
-    let wi = si.wi.val();
-    if wi.z == 0.0 {
-        return None;
-    }
-    let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
-    let r = f.val();
-    let t = 1.0 - r;
-    if u1 < r {
-        let mut w = V3::splat(f / r);
-        if let Some(tex) = refl {
-            w = w.mul_elem(tex.eval(store, si));
-        }
-        Some(BsdfSample {
-            wo: Vec3::new(-wi.x, -wi.y, wi.z),
-            pdf: r,
-            weight: w,
-            eta: 1.0,
-            lobe: BsdfFlags::DELTA_REFLECTION,
-        })
-    } else {
-        if !(t > 0.0) {
-            return None;
-        }
-        let eti = eta_ti.val();
-        let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
-        // radiance is scaled by η_ti² crossing the interface
-        let mut w = V3::splat((-f + 1.0) * eta_ti * eta_ti / t);
-        if let Some(tex) = trans {
-            w = w.mul_elem(tex.eval(store, si));
-        }
-        Some(BsdfSample {
-            wo,
-            pdf: t,
-            weight: w,
-            eta: eta_it.val(),
-            lobe: BsdfFlags::DELTA_TRANSMISSION,
+            eta,
+            specular_reflectance,
+            specular_transmittance,
         })
     }
 }
@@ -122,14 +62,24 @@ impl BsdfT for Dielectric {
         u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
+        let wi = si.wi.val();
+        if wi.z == 0.0 {
+            return None;
+        }
         let eta = store.read::<R>(self.eta, 0);
-        sample_smooth_interface(
+        let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
+        let eti = eta_ti.val();
+        let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
+        // radiance is scaled by η_ti² crossing the interface
+        let value = (-f + 1.0) * eta_ti * eta_ti;
+        sample_reflect_or_transmit(
             store,
             si,
-            eta,
+            f,
             &self.specular_reflectance,
             &self.specular_transmittance,
             u1,
+            (wo, value, eta_it.val(), BsdfFlags::DELTA_TRANSMISSION),
         )
     }
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
@@ -185,12 +135,7 @@ mod tests {
                 }
             }
             // reflection frequency ~ Binomial(n, F)
-            let sd = (n as f32 * f * (1.0 - f)).sqrt();
-            assert!(
-                (nr as f32 - n as f32 * f).abs() <= 4.0 * sd + 1.0,
-                "{wi:?}: {nr} vs {}",
-                n as f32 * f
-            );
+            assert_binomial(nr, n, f, &format!("{wi:?}: "));
             let (a, _) = albedo_estimate(&b, &store, wi, 2000, 9);
             assert!((a.x - 1.0).abs() < 1e-4, "{a}");
             assert!(

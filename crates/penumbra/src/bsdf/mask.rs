@@ -1,7 +1,7 @@
 //! `mask`: opacity masks (leaves, fences): a blend of a nested BSDF and a
 //! null pass-through.
 
-use super::{nested_bsdfs, Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use super::{chosen_with, nested_bsdfs, reuse_uniform, Bsdf, BsdfFlags, BsdfSample, BsdfT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -76,20 +76,13 @@ impl BsdfT for Mask {
         let o = o_r.val();
         if u1 >= o {
             let p = 1.0 - o;
-            return Some(BsdfSample {
-                wo: -si.wi.val(),
-                pdf: p,
-                weight: V3::splat((-o_r + 1.0) / p),
-                eta: 1.0,
-                lobe: BsdfFlags::NULL,
-            });
+            let weight = V3::splat((-o_r + 1.0) / p);
+            return Some(BsdfSample::pass_through(si.wi.val(), p, weight));
         }
-        let mut bs = self
+        let bs = self
             .nested
-            .sample(store, si, (u1 / o).min(1.0 - f32::EPSILON), u2)?;
-        bs.pdf *= o;
-        bs.weight *= o_r / o;
-        Some(bs)
+            .sample(store, si, reuse_uniform(u1, 0.0, o), u2)?;
+        Some(chosen_with(bs, o, o_r))
     }
 
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {

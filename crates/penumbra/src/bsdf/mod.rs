@@ -40,7 +40,7 @@ use crate::geometry::SurfaceInteraction;
 use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{Class, LoadContext, Node, Prop, Value};
-use crate::texture::{Channels, Texture};
+use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::rc::Rc;
 
@@ -88,6 +88,32 @@ pub struct BsdfSample<R> {
     pub eta: f32,
     /// The lobe the sample came from.
     pub lobe: BsdfFlags,
+}
+
+impl<R: Real> BsdfSample<R> {
+    /// A delta reflection about the normal (`wo` = `wi` mirrored, `eta`
+    /// 1) chosen with probability `pdf`.
+    pub(crate) fn specular_reflection(wi: Vec3, pdf: f32, weight: Spectrum<R>) -> Self {
+        BsdfSample {
+            wo: Vec3::new(-wi.x, -wi.y, wi.z),
+            pdf,
+            weight,
+            eta: 1.0,
+            lobe: BsdfFlags::DELTA_REFLECTION,
+        }
+    }
+
+    /// An index-matched pass-through (`NULL` lobe: `wo = −wi`, `eta` 1)
+    /// chosen with probability `pdf`.
+    pub(crate) fn pass_through(wi: Vec3, pdf: f32, weight: Spectrum<R>) -> Self {
+        BsdfSample {
+            wo: -wi,
+            pdf,
+            weight,
+            eta: 1.0,
+            lobe: BsdfFlags::NULL,
+        }
+    }
 }
 
 /// What every BSDF plugin provides.
@@ -276,19 +302,44 @@ pub(crate) fn detach_si<R: Real>(si: &SurfaceInteraction<R>) -> SurfaceInteracti
     }
 }
 
-/// A texture-valued parameter that exists only when given (Mitsuba's
-/// optional `specular_reflectance` / `specular_transmittance`).
-pub(crate) fn opt_texture(
+/// Mitsuba's optional `specular_reflectance` / `specular_transmittance`:
+/// an RGB factor in [0, 1] (value or texture) that modulates a specular
+/// lobe, present only when given.
+pub(crate) fn specular_factor(
     node: &Node,
     name: &str,
-    channels: Channels,
-    domain: Domain,
     ctx: &mut LoadContext,
 ) -> Result<Option<Texture>> {
     if node.has(name) {
-        Texture::from_prop(node, name, None, channels, domain, ctx).map(Some)
+        Texture::from_prop(node, name, None, Channels::Rgb, Domain::UnitInterval, ctx).map(Some)
     } else {
         Ok(None)
+    }
+}
+
+/// Both optional specular factors of the dielectric plugins, in the order
+/// Mitsuba registers them: (`specular_reflectance`,
+/// `specular_transmittance`).
+pub(crate) fn specular_factors(
+    node: &Node,
+    ctx: &mut LoadContext,
+) -> Result<(Option<Texture>, Option<Texture>)> {
+    let reflectance = specular_factor(node, "specular_reflectance", ctx)?;
+    let transmittance = specular_factor(node, "specular_transmittance", ctx)?;
+    Ok((reflectance, transmittance))
+}
+
+/// `value` times the optional specular factor evaluated at `si` (unchanged
+/// when the factor was not given).
+pub(crate) fn modulate<R: Real>(
+    value: Spectrum<R>,
+    factor: &Option<Texture>,
+    store: &ParamStore,
+    si: &SurfaceInteraction<R>,
+) -> Spectrum<R> {
+    match factor {
+        Some(t) => value.mul_elem(t.eval(store, si)),
+        None => value,
     }
 }
 
@@ -398,6 +449,85 @@ fn rekey(node: &Node, key: &str) -> Node {
             .push(Prop::new(p.name.clone(), value, p.loc.clone()));
     }
     n
+}
+
+/// The sample of a smooth lobe at the already chosen direction `wo`: its
+/// density is the BSDF's `pdf(wo)` (all lobes, as the lobe choice is
+/// random) and its weight `eval(wo) / pdf`; `None` where the density is 0.
+pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
+    b: &B,
+    store: &ParamStore,
+    si: &SurfaceInteraction<R>,
+    wo: Vec3,
+    eta: f32,
+    lobe: BsdfFlags,
+) -> Option<BsdfSample<R>> {
+    let pdf = b.pdf(store, si, wo);
+    if !(pdf > 0.0) {
+        return None;
+    }
+    Some(BsdfSample {
+        wo,
+        pdf,
+        weight: b.eval(store, si, wo).scale(1.0 / pdf),
+        eta,
+        lobe,
+    })
+}
+
+/// The transmitted half of [`sample_reflect_or_transmit`]: direction,
+/// R-valued transmitted value (`1 − F`, times any radiance scaling), the
+/// relative index along the path and the lobe.
+pub(crate) type Transmitted<R> = (Vec3, R, f32, BsdfFlags);
+
+/// Chooses between the delta reflection and the delta transmission of a
+/// smooth interface (`dielectric`, `thindielectric`) with the primal
+/// probabilities `F` and `1 − F` of its R-valued reflectance `f`. The
+/// reflected weight is `F / F` times `specular_reflectance`, the
+/// transmitted one `value / (1 − F)` times `specular_transmittance`.
+/// `None` when the transmission was chosen but has probability 0.
+pub(crate) fn sample_reflect_or_transmit<R: Real>(
+    store: &ParamStore,
+    si: &SurfaceInteraction<R>,
+    f: R,
+    specular_reflectance: &Option<Texture>,
+    specular_transmittance: &Option<Texture>,
+    u1: f32,
+    transmitted: Transmitted<R>,
+) -> Option<BsdfSample<R>> {
+    let r = f.val();
+    let t = 1.0 - r;
+    if u1 < r {
+        let w = modulate(V3::splat(f / r), specular_reflectance, store, si);
+        return Some(BsdfSample::specular_reflection(si.wi.val(), r, w));
+    }
+    if !(t > 0.0) {
+        return None;
+    }
+    let (wo, value, eta, lobe) = transmitted;
+    Some(BsdfSample {
+        wo,
+        pdf: t,
+        weight: modulate(V3::splat(value / t), specular_transmittance, store, si),
+        eta,
+        lobe,
+    })
+}
+
+/// Where `u` (uniform on [0, 1)) lands inside the sub-interval
+/// `[start, start + width)` it fell in, rescaled to [0, 1) for reuse by
+/// the chosen component (`blendbsdf`, `mask`).
+pub(crate) fn reuse_uniform(u: f32, start: f32, width: f32) -> f32 {
+    ((u - start) / width).min(1.0 - f32::EPSILON)
+}
+
+/// A component's sample scaled by the probability `prob` (primal) /
+/// `prob_r` (differentiable) with which the component was chosen: the
+/// density times `prob`, the weight times `prob_r / prob`.
+pub(crate) fn chosen_with<R: Real>(mut bs: BsdfSample<R>, prob: f32, prob_r: R) -> BsdfSample<R> {
+    bs.pdf *= prob;
+    bs.weight *= prob_r / prob;
+    bs
 }
 
 /// Mitsuba's default `eval_diffuse_reflectance`: `π f(wi, +z) cos`, used

@@ -37,13 +37,11 @@ impl BsdfT for Null {
         _u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        Some(BsdfSample {
-            wo: -si.wi.val(),
-            pdf: 1.0,
-            weight: V3::splat(R::cst(1.0)),
-            eta: 1.0,
-            lobe: BsdfFlags::NULL,
-        })
+        Some(BsdfSample::pass_through(
+            si.wi.val(),
+            1.0,
+            V3::splat(R::cst(1.0)),
+        ))
     }
     fn albedo<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()

@@ -5,7 +5,9 @@
 //! when `nonlinear`), with `F_dr` the diffuse Fresnel reflectance.
 
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance};
-use super::{eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    eta_props, modulate, scalar_param, smooth_sample, specular_factor, BsdfFlags, BsdfSample, BsdfT,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -78,27 +80,37 @@ pub(crate) fn sampling_weight(
     }
 }
 
+/// The diffuse base of `plastic` and `roughplastic`:
+/// (`diffuse_reflectance` (RGB in [0, 1], default 0.5),
+/// `specular_reflectance` (optional factor), `nonlinear` (default false)).
+pub(crate) fn coated_diffuse_props(
+    node: &Node,
+    ctx: &mut LoadContext,
+) -> Result<(Texture, Option<Texture>, bool)> {
+    let diffuse_reflectance = Texture::from_prop(
+        node,
+        "diffuse_reflectance",
+        Some(0.5),
+        Channels::Rgb,
+        Domain::UnitInterval,
+        ctx,
+    )?;
+    let specular_reflectance = specular_factor(node, "specular_reflectance", ctx)?;
+    let nonlinear = node.bool("nonlinear", false)?;
+    Ok((diffuse_reflectance, specular_reflectance, nonlinear))
+}
+
 impl Plastic {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Plastic> {
         let eta = eta_props(node, 1.49, 1.000277)?;
+        let eta = scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?;
+        let (diffuse_reflectance, specular_reflectance, nonlinear) =
+            coated_diffuse_props(node, ctx)?;
         Ok(Plastic {
-            eta: scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?,
-            diffuse_reflectance: Texture::from_prop(
-                node,
-                "diffuse_reflectance",
-                Some(0.5),
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            specular_reflectance: opt_texture(
-                node,
-                "specular_reflectance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            nonlinear: node.bool("nonlinear", false)?,
+            diffuse_reflectance,
+            specular_reflectance,
+            eta,
+            nonlinear,
             specular_sampling_weight: 0.5,
         })
     }
@@ -164,30 +176,11 @@ impl BsdfT for Plastic {
         let f_i = fresnel_dielectric(si.wi.z, eta).0;
         let ps = specular_probability(f_i.val(), self.specular_sampling_weight);
         if u1 < ps {
-            let mut w = V3::splat(f_i / ps);
-            if let Some(t) = &self.specular_reflectance {
-                w = w.mul_elem(t.eval(store, si));
-            }
-            return Some(BsdfSample {
-                wo: Vec3::new(-wi.x, -wi.y, wi.z),
-                pdf: ps,
-                weight: w,
-                eta: 1.0,
-                lobe: BsdfFlags::DELTA_REFLECTION,
-            });
+            let w = modulate(V3::splat(f_i / ps), &self.specular_reflectance, store, si);
+            return Some(BsdfSample::specular_reflection(wi, ps, w));
         }
         let wo = warp::square_to_cosine_hemisphere(u2);
-        let pdf = self.pdf(store, si, wo);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample {
-            wo,
-            pdf,
-            weight: self.eval(store, si, wo).scale(1.0 / pdf),
-            eta: 1.0,
-            lobe: BsdfFlags::DIFFUSE_REFLECTION,
-        })
+        smooth_sample(self, store, si, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
     }
 
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
@@ -213,17 +206,7 @@ mod tests {
             ],
         ];
         let wis = [dir(0.9, 0.2), dir(0.1, 1.0)];
-        for c in &cases {
-            let (b, store) = build("plastic", c);
-            check_smooth(&b, &store, &wis, cases.len());
-            for wi in wis {
-                let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 2);
-                assert!(
-                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
-                    "{a} ± {se}"
-                );
-            }
-        }
+        check_sampling_and_albedo("plastic", &cases, &wis, 2);
         // specular lobe: mirror direction, weight = F / P(specular)
         let (b, store) = build("plastic", &[]);
         let wi = dir(0.5, 0.3);

@@ -10,15 +10,15 @@ use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet::{
     beckmann_visible_slope_x, erfinv, sample_ggx_visible, MicrofacetDistribution, MicrofacetType,
 };
-use super::plastic::{coated_diffuse, sampling_weight, specular_probability};
-use super::{eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use super::plastic::{coated_diffuse, coated_diffuse_props, sampling_weight, specular_probability};
+use super::{eta_props, modulate, scalar_param, smooth_sample, BsdfFlags, BsdfSample, BsdfT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture, TextureT};
+use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// Resolution in cos θ of the transmittance table (Mitsuba's
@@ -59,27 +59,19 @@ impl RoughPlastic {
         };
         let alpha = node.float_checked("alpha", 0.1, true)?;
         let eta = eta_props(node, 1.49, 1.000277)?;
+        let alpha = scalar_param(node, "alpha", alpha, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let sample_visible = node.bool("sample_visible", true)?;
+        let eta = scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let (diffuse_reflectance, specular_reflectance, nonlinear) =
+            coated_diffuse_props(node, ctx)?;
         Ok(RoughPlastic {
             kind,
-            alpha: scalar_param(node, "alpha", alpha, ParamFlags::DIFFERENTIABLE, ctx)?,
-            sample_visible: node.bool("sample_visible", true)?,
-            eta: scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?,
-            diffuse_reflectance: Texture::from_prop(
-                node,
-                "diffuse_reflectance",
-                Some(0.5),
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            specular_reflectance: opt_texture(
-                node,
-                "specular_reflectance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            nonlinear: node.bool("nonlinear", false)?,
+            alpha,
+            sample_visible,
+            eta,
+            diffuse_reflectance,
+            specular_reflectance,
+            nonlinear,
             specular_sampling_weight: 0.5,
             external_transmittance: Vec::new(),
             internal_reflectance: 0.0,
@@ -270,9 +262,7 @@ impl BsdfT for RoughPlastic {
         } else {
             V3::zero()
         };
-        if let Some(t) = &self.specular_reflectance {
-            spec = spec.mul_elem(t.eval(store, si));
-        }
+        spec = modulate(spec, &self.specular_reflectance, store, si);
         let t_i = R::cst(self.transmittance(wi.z.val()));
         let t_o = R::cst(self.transmittance(wo.z));
         let diff = coated_diffuse(
@@ -329,17 +319,7 @@ impl BsdfT for RoughPlastic {
         if !(wo.z > 0.0) {
             return None;
         }
-        let pdf = self.pdf(store, si, wo);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample {
-            wo,
-            pdf,
-            weight: self.eval(store, si, wo).scale(1.0 / pdf),
-            eta: 1.0,
-            lobe,
-        })
+        smooth_sample(self, store, si, wo, 1.0, lobe)
     }
 
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
@@ -374,17 +354,7 @@ mod tests {
             vec![("alpha", float(0.4)), ("nonlinear", boolean(true))],
         ];
         let wis = [dir(0.85, 0.2), dir(0.15, 1.5)];
-        for c in &cases {
-            let (b, store) = build("roughplastic", c);
-            check_smooth(&b, &store, &wis, cases.len());
-            for wi in wis {
-                let (a, se) = albedo_estimate(&b, &store, wi, 20_000, 4);
-                assert!(
-                    a.max_element() <= 1.0 + 4.0 * se.max_element(),
-                    "{a} ± {se}"
-                );
-            }
-        }
+        check_sampling_and_albedo("roughplastic", &cases, &wis, 4);
     }
 
     /// Values of Mitsuba 3.9.1 (scalar_rgb) roughplastic `eval` / `pdf` for

@@ -224,3 +224,57 @@ pub fn albedo_quadrature(
     }
     Vec3::new(sum[0] as f32, sum[1] as f32, sum[2] as f32)
 }
+
+/// Asserts that `hits` successes in `n` trials agree with probability `p`:
+/// within 4 standard deviations of Binomial(n, p), plus 1 for rounding.
+pub fn assert_binomial(hits: usize, n: usize, p: f32, what: &str) {
+    let sd = (n as f32 * p * (1.0 - p)).sqrt();
+    assert!(
+        (hits as f32 - n as f32 * p).abs() <= 4.0 * sd + 1.0,
+        "{what}{hits} vs {}",
+        n as f32 * p
+    );
+}
+
+/// Energy conservation at `wi`: the sampled albedo (20 000 samples from
+/// `seed`) is at most 1 within 4 standard errors, the quadrature of `eval`
+/// (200 cells; transmitted values times `trans_scale`) at most 1 + 5e-3,
+/// and the two agree within 4 standard errors + 5e-3. Returns the sampled
+/// albedo (first channel) and the message describing the case.
+pub fn check_energy(
+    b: &Bsdf,
+    store: &ParamStore,
+    wi: Vec3,
+    seed: u64,
+    trans_scale: f32,
+    what: &str,
+) -> (f32, String) {
+    let (a, se) = albedo_estimate(b, store, wi, 20_000, seed);
+    let q = albedo_quadrature(b, store, wi, 200, trans_scale);
+    let msg = format!("{what} {wi:?}: MC {a} ± {se}, quadrature {q}");
+    assert!(a.x <= 1.0 + 4.0 * se.x && q.x <= 1.0 + 5e-3, "{msg}");
+    assert!((a.x - q.x).abs() <= 4.0 * se.x + 5e-3, "{msg}");
+    (a.x, msg)
+}
+
+/// For each property set of `plugin`: [`check_smooth`] at `wis`, and the
+/// sampled albedo (20 000 samples from `seed`) at each of `wis` at most 1
+/// within 4 standard errors in every channel.
+pub fn check_sampling_and_albedo(
+    plugin: &str,
+    cases: &[Vec<(&str, Value)>],
+    wis: &[Vec3],
+    seed: u64,
+) {
+    for c in cases {
+        let (b, store) = build(plugin, c);
+        check_smooth(&b, &store, wis, cases.len());
+        for &wi in wis {
+            let (a, se) = albedo_estimate(&b, &store, wi, 20_000, seed);
+            assert!(
+                a.max_element() <= 1.0 + 4.0 * se.max_element(),
+                "{a} ± {se}"
+            );
+        }
+    }
+}

@@ -3,14 +3,17 @@
 //! transmitted light continues undeflected.
 
 use super::fresnel::fresnel_dielectric;
-use super::{default_albedo, eta_props, opt_texture, scalar_param, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    default_albedo, eta_props, sample_reflect_or_transmit, scalar_param, specular_factors,
+    BsdfFlags, BsdfSample, BsdfT,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture, TextureT};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Thin dielectric. Parameters (Mitsuba 3): `int_ior` (default bk7),
@@ -28,22 +31,12 @@ pub struct ThinDielectric {
 impl ThinDielectric {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<ThinDielectric> {
         let eta = eta_props(node, 1.5046, 1.000277)?;
+        let eta = scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let (specular_reflectance, specular_transmittance) = specular_factors(node, ctx)?;
         Ok(ThinDielectric {
-            eta: scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?,
-            specular_reflectance: opt_texture(
-                node,
-                "specular_reflectance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
-            specular_transmittance: opt_texture(
-                node,
-                "specular_transmittance",
-                Channels::Rgb,
-                Domain::UnitInterval,
-                ctx,
-            )?,
+            eta,
+            specular_reflectance,
+            specular_transmittance,
         })
     }
 }
@@ -73,36 +66,15 @@ impl BsdfT for ThinDielectric {
         if f.val() < 1.0 {
             f = f * 2.0 / (f + 1.0);
         }
-        let r = f.val();
-        let t = 1.0 - r;
-        if u1 < r {
-            let mut w = V3::splat(f / r);
-            if let Some(tex) = &self.specular_reflectance {
-                w = w.mul_elem(tex.eval(store, si));
-            }
-            Some(BsdfSample {
-                wo: Vec3::new(-wi.x, -wi.y, wi.z),
-                pdf: r,
-                weight: w,
-                eta: 1.0,
-                lobe: BsdfFlags::DELTA_REFLECTION,
-            })
-        } else {
-            if !(t > 0.0) {
-                return None;
-            }
-            let mut w = V3::splat((-f + 1.0) / t);
-            if let Some(tex) = &self.specular_transmittance {
-                w = w.mul_elem(tex.eval(store, si));
-            }
-            Some(BsdfSample {
-                wo: -wi,
-                pdf: t,
-                weight: w,
-                eta: 1.0,
-                lobe: BsdfFlags::NULL,
-            })
-        }
+        sample_reflect_or_transmit(
+            store,
+            si,
+            f,
+            &self.specular_reflectance,
+            &self.specular_transmittance,
+            u1,
+            (-wi, -f + 1.0, 1.0, BsdfFlags::NULL),
+        )
     }
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
@@ -141,12 +113,7 @@ mod tests {
                     assert!((bs.wo + wi).length() < 1e-6);
                 }
             }
-            let sd = (n as f32 * r * (1.0 - r)).sqrt();
-            assert!(
-                (nr as f32 - n as f32 * r).abs() <= 4.0 * sd + 1.0,
-                "{nr} vs {}",
-                n as f32 * r
-            );
+            assert_binomial(nr, n, r, "");
         }
         // eta is differentiable: d weight / d eta of the reflected lobe
         store.set_tangent("b.eta", &[1.0]).unwrap();

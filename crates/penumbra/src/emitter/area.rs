@@ -1,14 +1,14 @@
 //! Mitsuba's `area` emitter: a shape that emits radiance from the side its
 //! normal points to.
 
-use super::{surface_si, DirectionSample, EmitterT};
+use super::{emission_prop, surface_si, DirectionSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture, TextureT};
+use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// Radiance `radiance` (a value or a texture over the shape's uv, key
@@ -24,14 +24,7 @@ pub struct Area {
 
 impl Area {
     pub fn from_node(node: &Node, shape: u32, ctx: &mut LoadContext) -> Result<Area> {
-        let radiance = Texture::from_prop(
-            node,
-            "radiance",
-            Some(1.0),
-            Channels::Rgb,
-            Domain::NonNegative,
-            ctx,
-        )?;
+        let radiance = emission_prop(node, "radiance", ctx)?;
         Ok(Area { radiance, shape })
     }
 

@@ -1,13 +1,13 @@
 //! Mitsuba's `constant` emitter: the same radiance from every direction.
 
-use super::{eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterT};
+use super::{emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Radiance `radiance` (key `<key>.radiance.value`) arriving from all
@@ -20,14 +20,7 @@ pub struct Constant {
 
 impl Constant {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Constant> {
-        let radiance = Texture::from_prop(
-            node,
-            "radiance",
-            Some(1.0),
-            Channels::Rgb,
-            Domain::NonNegative,
-            ctx,
-        )?;
+        let radiance = emission_prop(node, "radiance", ctx)?;
         Ok(Constant {
             radiance,
             bounds: BoundingSphere::default(),

@@ -1,14 +1,15 @@
 //! Mitsuba's `directional` emitter: parallel light from infinitely far
 //! away.
 
-use super::{eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterT};
+use super::{delta_light_queries, emission_prop, eval_uniform, far_point, vec3_or_to_world};
+use super::{BoundingSphere, DirectionSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{Shape, SurfaceInteraction};
-use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::geometry::Shape;
+use crate::math::Spectrum;
+use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Irradiance `irradiance` (W/m² on a surface facing the light, key
@@ -25,22 +26,8 @@ pub struct Directional {
 
 impl Directional {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Directional> {
-        let irradiance = Texture::from_prop(
-            node,
-            "irradiance",
-            Some(1.0),
-            Channels::Rgb,
-            Domain::NonNegative,
-            ctx,
-        )?;
-        let dir = match (node.vec3_opt("direction")?, node.has("to_world")) {
-            (Some(_), true) => {
-                return Err(node
-                    .error("only one of the parameters 'direction' and 'to_world' can be given"))
-            }
-            (Some(d), false) => d,
-            (None, _) => node.transform("to_world")?.vector(Vec3::Z),
-        };
+        let irradiance = emission_prop(node, "irradiance", ctx)?;
+        let dir = vec3_or_to_world(node, "direction", |t| t.vector(Vec3::Z))?;
         let direction = dir.normalize();
         if !direction.is_finite() {
             return Err(node.error("the light direction must be a non-zero vector"));
@@ -74,29 +61,7 @@ impl EmitterT for Directional {
         };
         Some((ds, eval_uniform::<R>(&self.irradiance, store)))
     }
-    fn pdf_direction(
-        &self,
-        _: &ParamStore,
-        _: &[Shape],
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-    ) -> f32 {
-        0.0
-    }
-    fn eval_surface<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn eval_environment<R: Real>(&self, _: &ParamStore, _: Vec3) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn is_delta(&self) -> bool {
-        true
-    }
-    fn is_environment(&self) -> bool {
-        false
-    }
+    delta_light_queries!();
 }
 
 #[cfg(test)]

@@ -18,10 +18,10 @@ pub use spot::Spot;
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
-use crate::math::{Frame, Spectrum, V2, V3};
-use crate::params::{ParamId, ParamStore};
+use crate::math::{Frame, Spectrum, Transform, V2, V3};
+use crate::params::{Domain, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Texture, TextureT};
+use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// A sphere enclosing the scene: environment and directional emitters
@@ -83,6 +83,101 @@ pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamStore) -> Spectrum
     let si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
     t.eval(store, &si)
 }
+
+/// The emitted quantity `name` of a light (`radiance`, `intensity`,
+/// `irradiance`): an RGB value or texture, non-negative, default 1, keyed
+/// `<key>.<name>.value` for a value.
+pub(crate) fn emission_prop(node: &Node, name: &str, ctx: &mut LoadContext) -> Result<Texture> {
+    Texture::from_prop(
+        node,
+        name,
+        Some(1.0),
+        Channels::Rgb,
+        Domain::NonNegative,
+        ctx,
+    )
+}
+
+/// A light's placement given either directly as the vector parameter
+/// `name` (`position` of `point`, `direction` of `directional`) or through
+/// `to_world` (mapped by `from_to_world`); giving both is an error, as in
+/// Mitsuba.
+pub(crate) fn vec3_or_to_world(
+    node: &Node,
+    name: &str,
+    from_to_world: impl FnOnce(&Transform) -> Vec3,
+) -> Result<Vec3> {
+    match (node.vec3_opt(name)?, node.has("to_world")) {
+        (Some(_), true) => Err(node.error(format!(
+            "only one of the parameters '{name}' and 'to_world' can be given"
+        ))),
+        (Some(v), false) => Ok(v),
+        (None, _) => Ok(from_to_world(&node.transform("to_world")?)),
+    }
+}
+
+/// The direction sample of a light at the point `p` (point, spot) seen
+/// from `ref_p`: unit direction and distance to `p`, pdf 1, delta, no
+/// normal; with the squared distance for the inverse-square falloff.
+/// `None` when `ref_p` is at the light.
+pub(crate) fn point_light_sample(p: Vec3, ref_p: Vec3) -> Option<(DirectionSample, f32)> {
+    let to = p - ref_p;
+    let dist2 = to.length_squared();
+    if !(dist2 > 0.0) {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    let ds = DirectionSample {
+        p,
+        n: Vec3::ZERO,
+        d: to / dist,
+        dist,
+        pdf: 1.0,
+        delta: true,
+    };
+    Some((ds, dist2))
+}
+
+/// The [`EmitterT`] queries of a delta light (`point`, `spot`,
+/// `directional`), written inside its `impl EmitterT`: no ray can hit it,
+/// so its direction density and its surface and environment radiance are
+/// zero; `is_delta` is true, `is_environment` false.
+macro_rules! delta_light_queries {
+    () => {
+        fn pdf_direction(
+            &self,
+            _: &$crate::params::ParamStore,
+            _: &[$crate::geometry::Shape],
+            _: glam::Vec3,
+            _: glam::Vec3,
+            _: glam::Vec3,
+            _: glam::Vec3,
+        ) -> f32 {
+            0.0
+        }
+        fn eval_surface<R: $crate::ad::Real>(
+            &self,
+            _: &$crate::params::ParamStore,
+            _: &$crate::geometry::SurfaceInteraction<R>,
+        ) -> $crate::math::Spectrum<R> {
+            $crate::math::V3::zero()
+        }
+        fn eval_environment<R: $crate::ad::Real>(
+            &self,
+            _: &$crate::params::ParamStore,
+            _: glam::Vec3,
+        ) -> $crate::math::Spectrum<R> {
+            $crate::math::V3::zero()
+        }
+        fn is_delta(&self) -> bool {
+            true
+        }
+        fn is_environment(&self) -> bool {
+            false
+        }
+    };
+}
+pub(crate) use delta_light_queries;
 
 /// A direction sampled towards an emitter from a reference point.
 #[derive(Clone, Copy, Debug)]

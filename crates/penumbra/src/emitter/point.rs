@@ -1,13 +1,16 @@
 //! Mitsuba's `point` emitter: an isotropic point light.
 
-use super::{eval_uniform, DirectionSample, EmitterT};
+use super::{
+    delta_light_queries, emission_prop, eval_uniform, point_light_sample, vec3_or_to_world,
+    DirectionSample, EmitterT,
+};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{Shape, SurfaceInteraction};
-use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::geometry::Shape;
+use crate::math::Spectrum;
+use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Radiant intensity `intensity` (W/sr, key `<key>.intensity.value`)
@@ -21,23 +24,8 @@ pub struct Point {
 
 impl Point {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Point> {
-        let intensity = Texture::from_prop(
-            node,
-            "intensity",
-            Some(1.0),
-            Channels::Rgb,
-            Domain::NonNegative,
-            ctx,
-        )?;
-        let position = match (node.vec3_opt("position")?, node.has("to_world")) {
-            (Some(_), true) => {
-                return Err(
-                    node.error("only one of the parameters 'position' and 'to_world' can be given")
-                )
-            }
-            (Some(p), false) => p,
-            (None, _) => node.transform("to_world")?.point(Vec3::ZERO),
-        };
+        let intensity = emission_prop(node, "intensity", ctx)?;
+        let position = vec3_or_to_world(node, "position", |t| t.point(Vec3::ZERO))?;
         Ok(Point {
             intensity,
             position,
@@ -54,46 +42,11 @@ impl EmitterT for Point {
         ref_p: Vec3,
         _u: Vec2,
     ) -> Option<(DirectionSample, Spectrum<R>)> {
-        let to = self.position - ref_p;
-        let dist2 = to.length_squared();
-        if !(dist2 > 0.0) {
-            return None;
-        }
-        let dist = dist2.sqrt();
-        let ds = DirectionSample {
-            p: self.position,
-            n: Vec3::ZERO,
-            d: to / dist,
-            dist,
-            pdf: 1.0,
-            delta: true,
-        };
+        let (ds, dist2) = point_light_sample(self.position, ref_p)?;
         let i = eval_uniform::<R>(&self.intensity, store);
         Some((ds, i.scale(1.0 / dist2)))
     }
-    fn pdf_direction(
-        &self,
-        _: &ParamStore,
-        _: &[Shape],
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-    ) -> f32 {
-        0.0
-    }
-    fn eval_surface<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn eval_environment<R: Real>(&self, _: &ParamStore, _: Vec3) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn is_delta(&self) -> bool {
-        true
-    }
-    fn is_environment(&self) -> bool {
-        false
-    }
+    delta_light_queries!();
 }
 
 #[cfg(test)]

@@ -1,14 +1,15 @@
 //! Mitsuba's `spot` emitter: a point light restricted to a cone, with a
 //! linear falloff between the beam width and the cutoff angle.
 
-use super::{eval_uniform, DirectionSample, EmitterT};
+use super::{delta_light_queries, emission_prop, eval_uniform, point_light_sample};
+use super::{DirectionSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{Shape, SurfaceInteraction};
-use crate::math::{Spectrum, Transform, V3};
-use crate::params::{Domain, ParamStore};
+use crate::geometry::Shape;
+use crate::math::{Spectrum, Transform};
+use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
-use crate::texture::{Channels, Texture};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Intensity `intensity` (key `<key>.intensity.value`) emitted from the
@@ -28,14 +29,7 @@ pub struct Spot {
 
 impl Spot {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Spot> {
-        let intensity = Texture::from_prop(
-            node,
-            "intensity",
-            Some(1.0),
-            Channels::Rgb,
-            Domain::NonNegative,
-            ctx,
-        )?;
+        let intensity = emission_prop(node, "intensity", ctx)?;
         let cutoff_deg = node.float_checked("cutoff_angle", 20.0, true)?;
         if cutoff_deg > 180.0 {
             let p = node.prop("cutoff_angle").expect("non-default value");
@@ -80,51 +74,16 @@ impl EmitterT for Spot {
         _u: Vec2,
     ) -> Option<(DirectionSample, Spectrum<R>)> {
         let pos = self.to_world.point(Vec3::ZERO);
-        let to = pos - ref_p;
-        let dist2 = to.length_squared();
-        if !(dist2 > 0.0) {
-            return None;
-        }
-        let dist = dist2.sqrt();
-        let local = self.to_world.inverse().vector(-to).normalize();
+        let (ds, dist2) = point_light_sample(pos, ref_p)?;
+        let local = self.to_world.inverse().vector(-(pos - ref_p)).normalize();
         let f = self.falloff(local);
         if !(f > 0.0) {
             return None;
         }
-        let ds = DirectionSample {
-            p: pos,
-            n: Vec3::ZERO,
-            d: to / dist,
-            dist,
-            pdf: 1.0,
-            delta: true,
-        };
         let i = eval_uniform::<R>(&self.intensity, store);
         Some((ds, i.scale(f / dist2)))
     }
-    fn pdf_direction(
-        &self,
-        _: &ParamStore,
-        _: &[Shape],
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-        _: Vec3,
-    ) -> f32 {
-        0.0
-    }
-    fn eval_surface<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn eval_environment<R: Real>(&self, _: &ParamStore, _: Vec3) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn is_delta(&self) -> bool {
-        true
-    }
-    fn is_environment(&self) -> bool {
-        false
-    }
+    delta_light_queries!();
 }
 
 #[cfg(test)]

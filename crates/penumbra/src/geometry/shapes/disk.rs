@@ -6,10 +6,11 @@
 //! Parameter in the store: `<key>.to_world` (`[4, 4]`, row-major, geometry).
 //! The normal is `to_world`'s normal transform of +z.
 
+use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
-use crate::math::{warp, Frame, Transform, V2, V3};
+use crate::math::{warp, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
@@ -157,10 +158,7 @@ impl ShapeT for Disk {
         let x = q.cross(a1).dot(nv) / nn;
         let y = a0.cross(q).dot(nv) / nn;
         let rr = (x * x + y * y).safe_sqrt();
-        let mut phi = y.atan2(x);
-        if phi.val() < 0.0 {
-            phi += R::cst(2.0 * PI);
-        }
+        let phi = azimuth(y, x);
         let uv = V2::new(rr, phi * (0.5 / PI));
         let dpdu = if rr.val() > 0.0 {
             (a0 * x + a1 * y) / rr
@@ -171,18 +169,7 @@ impl ShapeT for Disk {
         if self.flip_normals {
             n = -n;
         }
-        let sh_frame = Frame::from_normal_tangent(n, dpdu);
-        let wi = sh_frame.to_local(-d);
-        SurfaceInteraction {
-            t,
-            p,
-            n,
-            sh_frame,
-            uv,
-            wi,
-            shape: hit.shape,
-            prim: hit.prim,
-        }
+        analytic_interaction(hit, d, t, p, n, dpdu, uv)
     }
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -192,10 +179,7 @@ impl ShapeT for Disk {
         if self.flip_normals {
             n = -n;
         }
-        let mut phi = l.y.atan2(l.x);
-        if phi < 0.0 {
-            phi += 2.0 * PI;
-        }
+        let phi = azimuth(l.y, l.x);
         PositionSample {
             p: f.c + f.a0 * l.x + f.a1 * l.y,
             n,

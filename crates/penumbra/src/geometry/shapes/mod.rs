@@ -12,9 +12,13 @@ pub mod sphere;
 pub use disk::Disk;
 pub use sphere::Sphere;
 
+use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::mesh::MeshOptions;
+use crate::geometry::{Hit, SurfaceInteraction};
+use crate::math::{Frame, V2, V3};
 use crate::scene::Node;
+use std::f32::consts::PI;
 
 /// `face_normals` and `flip_normals` of a mesh plugin.
 pub(crate) fn mesh_options(node: &Node) -> Result<MeshOptions> {
@@ -30,4 +34,41 @@ pub(crate) fn filename(node: &Node, ctx: &crate::scene::LoadContext) -> Result<s
         .string_opt("filename")?
         .ok_or_else(|| node.error("missing required parameter 'filename'"))?;
     ctx.resolve_path(node, "filename", &f)
+}
+
+/// The azimuth `atan2(y, x)` wrapped to [0, 2π) (the φ of the analytic
+/// shapes' uv parametrisations).
+pub(crate) fn azimuth<R: Real>(y: R, x: R) -> R {
+    let mut phi = y.atan2(x);
+    if phi.val() < 0.0 {
+        phi += R::cst(2.0 * PI);
+    }
+    phi
+}
+
+/// The interaction of ray direction `d` hitting an analytic shape at
+/// distance `t`, point `p`, with unit normal `n` (as oriented after
+/// `flip_normals`), tangent `dpdu` and surface coordinates `uv`: the
+/// shading frame from `n` and `dpdu`, `wi = −d` in it.
+pub(crate) fn analytic_interaction<R: Real>(
+    hit: &Hit,
+    d: V3<R>,
+    t: R,
+    p: V3<R>,
+    n: V3<R>,
+    dpdu: V3<R>,
+    uv: V2<R>,
+) -> SurfaceInteraction<R> {
+    let sh_frame = Frame::from_normal_tangent(n, dpdu);
+    let wi = sh_frame.to_local(-d);
+    SurfaceInteraction {
+        t,
+        p,
+        n,
+        sh_frame,
+        uv,
+        wi,
+        shape: hit.shape,
+        prim: hit.prim,
+    }
 }

@@ -9,10 +9,11 @@
 //! uv = (φ / 2π, θ / π) of the hit point in the sphere's local frame
 //! (Mitsuba's convention), normal outward (inward with `flip_normals`).
 
+use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
-use crate::math::{warp, Frame, V2, V3};
+use crate::math::{warp, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
 use glam::{Mat3, Vec2, Vec3};
@@ -172,28 +173,14 @@ impl ShapeT for Sphere {
         let ly = n.dot(V3::cst(cy));
         let lz = n.dot(V3::cst(cz));
         let theta = lz.clamp(-1.0, 1.0).acos();
-        let mut phi = ly.atan2(lx);
-        if phi.val() < 0.0 {
-            phi += R::cst(2.0 * PI);
-        }
+        let phi = azimuth(ly, lx);
         let uv = V2::new(phi * (0.5 / PI), theta * (1.0 / PI));
         // dp/du = 2π r (-ly, lx, 0) in the local frame
         let dpdu = (V3::cst(cy) * lx - V3::cst(cx) * ly) * (r * (2.0 * PI));
         if self.flip_normals {
             n = -n;
         }
-        let sh_frame = Frame::from_normal_tangent(n, dpdu);
-        let wi = sh_frame.to_local(-d);
-        SurfaceInteraction {
-            t,
-            p,
-            n,
-            sh_frame,
-            uv,
-            wi,
-            shape: hit.shape,
-            prim: hit.prim,
-        }
+        analytic_interaction(hit, d, t, p, n, dpdu, uv)
     }
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -201,10 +188,7 @@ impl ShapeT for Sphere {
         let local = warp::square_to_uniform_sphere(u);
         let nw = self.rot * local;
         let theta = local.z.clamp(-1.0, 1.0).acos();
-        let mut phi = local.y.atan2(local.x);
-        if phi < 0.0 {
-            phi += 2.0 * PI;
-        }
+        let phi = azimuth(local.y, local.x);
         PositionSample {
             p: c + nw * r,
             n: if self.flip_normals { -nw } else { nw },
