@@ -14,9 +14,3 @@ pub use vector::{Spectrum, V2, V3};
 /// Offset applied along the normal to ray origins leaving a surface,
 /// relative to the magnitude of the hit position (avoids self-intersection).
 pub const RAY_EPSILON: f32 = 1e-4;
-
-/// Reflects `wi` about +z in a local shading frame.
-#[inline(always)]
-pub fn reflect_local<R: crate::ad::Real>(w: V3<R>) -> V3<R> {
-    V3::new(-w.x, -w.y, w.z)
-}
