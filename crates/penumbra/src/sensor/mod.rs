@@ -93,6 +93,18 @@ impl Sensor {
     pub fn needs_aperture_sample(&self) -> bool {
         matches!(self.camera, Camera::ThinLens(_))
     }
+
+    /// The same sensor (film, sampler, lens) placed at another pose, e.g.
+    /// for the extra views of a multi-view optimisation.
+    pub fn with_to_world(&self, to_world: crate::math::Transform) -> Sensor {
+        let mut s = self.clone();
+        match &mut s.camera {
+            Camera::Perspective(c) => c.to_world = to_world,
+            Camera::ThinLens(c) => c.to_world = to_world,
+            Camera::Orthographic(c) => c.to_world = to_world,
+        }
+        s
+    }
 }
 
 /// The horizontal field of view (degrees) from Mitsuba's `fov` and
@@ -152,18 +164,4 @@ pub(crate) fn pinhole_direction(pos: Vec2, tan_x: f32, aspect: f32, offset: Vec2
     let x = (1.0 - 2.0 * pos.x + 2.0 * offset.x) * tan_x;
     let y = (1.0 - 2.0 * pos.y + 2.0 * offset.y) * tan_x / aspect;
     glam::Vec3::new(x, y, 1.0)
-}
-
-impl Sensor {
-    /// The same sensor (film, sampler, lens) placed at another pose, e.g.
-    /// for the extra views of a multi-view optimisation.
-    pub fn with_to_world(&self, to_world: crate::math::Transform) -> Sensor {
-        let mut s = self.clone();
-        match &mut s.camera {
-            Camera::Perspective(c) => c.to_world = to_world,
-            Camera::ThinLens(c) => c.to_world = to_world,
-            Camera::Orthographic(c) => c.to_world = to_world,
-        }
-        s
-    }
 }
