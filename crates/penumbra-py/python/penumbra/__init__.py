@@ -187,6 +187,19 @@ def _sensor(sensor):
     return int(sensor)
 
 
+
+def _render_options(spp, seed, sensor, integrator, progress, threads) -> dict:
+    """The checked keyword arguments shared by the render calls."""
+    return dict(
+        spp=_spp(spp),
+        seed=_seed(seed),
+        sensor=_sensor(sensor),
+        integrator=_integrator(integrator),
+        progress=progress,
+        threads=threads,
+    )
+
+
 def render(
     scene: Scene,
     params=None,
@@ -209,12 +222,7 @@ def render(
     """
     _check_scene(scene)
     return scene.render(
-        spp=_spp(spp),
-        seed=_seed(seed),
-        sensor=_sensor(sensor),
-        integrator=_integrator(integrator),
-        progress=progress,
-        threads=threads,
+        **_render_options(spp, seed, sensor, integrator, progress, threads),
     )
 
 
@@ -242,12 +250,7 @@ def render_forward(
         ts.append((k, as_float_array(v, k, shape, what="tangent").reshape(-1)))
     return scene.render_forward(
         ts,
-        spp=_spp(spp),
-        seed=_seed(seed),
-        sensor=_sensor(sensor),
-        integrator=_integrator(integrator),
-        progress=progress,
-        threads=threads,
+        **_render_options(spp, seed, sensor, integrator, progress, threads),
     )
 
 
@@ -289,12 +292,7 @@ def render_backward(
     return scene.render_backward(
         np.ascontiguousarray(a, dtype=np.float32),
         keys=keys,
-        spp=_spp(spp),
-        seed=_seed(seed),
-        sensor=_sensor(sensor),
-        integrator=_integrator(integrator),
-        progress=progress,
-        threads=threads,
+        **_render_options(spp, seed, sensor, integrator, progress, threads),
     )
 
 

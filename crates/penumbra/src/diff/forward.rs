@@ -30,21 +30,17 @@ pub fn render_forward(
 }
 
 fn derivative_image(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
-    let block = match &scene.integrator {
-        Integrator::Path(p) => render_samples(scene, opts, 3, |ray, rng, out| {
-            let l = p.sample::<Dual>(scene, ray, rng);
+    let integrator = &scene.integrator;
+    if let Integrator::Aov(_) = integrator {
+        return Err(Error::Invalid(
+            "the aov integrator has no derivatives; use path or direct".into(),
+        ));
+    }
+    let block = render_samples(scene, opts, 3, |ray, rng, out| {
+        if let Some(l) = integrator.radiance::<Dual>(scene, ray, rng) {
             out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
-        })?,
-        Integrator::Direct(d) => render_samples(scene, opts, 3, |ray, rng, out| {
-            let l = d.sample::<Dual>(scene, ray, rng);
-            out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
-        })?,
-        Integrator::Aov(_) => {
-            return Err(Error::Invalid(
-                "the aov integrator has no derivatives; use path or direct".into(),
-            ))
         }
-    };
+    })?;
     Ok(Rendered {
         width: block.width,
         height: block.height,

@@ -11,8 +11,10 @@ pub use direct::DirectIntegrator;
 pub use path::PathIntegrator;
 pub use render::{render, RenderOptions, Rendered};
 
+use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Ray;
+use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 
@@ -58,12 +60,29 @@ impl Integrator {
     /// Primal estimate along `ray`, written to `out` (`channel_count()`
     /// values).
     pub fn sample(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream, out: &mut [f32]) {
-        let rgb = match self {
-            Integrator::Path(p) => p.sample::<f32>(scene, ray, rng),
-            Integrator::Direct(d) => d.sample::<f32>(scene, ray, rng),
-            Integrator::Aov(a) => return a.sample(scene, ray, rng, out),
-        };
+        if let Integrator::Aov(a) = self {
+            return a.sample(scene, ray, rng, out);
+        }
+        let rgb = self
+            .radiance::<f32>(scene, ray, rng)
+            .expect("path and direct integrators estimate radiance");
         out[..3].copy_from_slice(&rgb.val().to_array());
+    }
+
+    /// The radiance estimate along `ray` in `R` (primal for f32,
+    /// derivatives for dual numbers); `None` for the AOV integrator, which
+    /// estimates no radiance of its own.
+    pub fn radiance<R: Real>(
+        &self,
+        scene: &Scene,
+        ray: Ray,
+        rng: &mut SampleStream,
+    ) -> Option<Spectrum<R>> {
+        match self {
+            Integrator::Path(p) => Some(p.sample::<R>(scene, ray, rng)),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, ray, rng)),
+            Integrator::Aov(_) => None,
+        }
     }
 }
 
