@@ -24,5 +24,7 @@ pub mod sensor;
 #[cfg(test)]
 pub(crate) mod testing;
 pub mod texture;
+pub mod warn;
 
 pub use error::{Error, Result};
+pub use warn::warn;
