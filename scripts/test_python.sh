@@ -2,10 +2,11 @@
 # Builds the Python wheel (crates/penumbra-py, maturin, abi3) into a fresh
 # virtualenv and runs its pytest suite (incl. the two example loops).
 #
-#   scripts/test_python.sh            # venv in target/py-venv (reused if present)
+#   scripts/test_python.sh            # venv in <target dir>/py-venv (reused if present)
 #   PENUMBRA_FRESH_VENV=1 scripts/test_python.sh   # recreate it
 #   PYTHON=python3.12 scripts/test_python.sh       # another interpreter (>= 3.9)
 #
+# The target dir is cargo's: $CARGO_TARGET_DIR when set, else ./target.
 # Needs network access to PyPI on the first run (maturin, pytest, numpy,
 # torch; torch from PyPI pulls CUDA libraries, ~5 GB). Set
 # PENUMBRA_NO_TORCH=1 to skip torch (its tests are then skipped).
@@ -13,7 +14,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 PYTHON=${PYTHON:-python3}
-VENV=${PENUMBRA_VENV:-$ROOT/target/py-venv}
+# cargo's own answer, so a relative or absolute CARGO_TARGET_DIR both work
+TARGET=$(cargo metadata --format-version 1 --no-deps \
+    | "$PYTHON" -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+VENV=${PENUMBRA_VENV:-$TARGET/py-venv}
+WHEELS=$TARGET/py-wheels
 
 if [[ "${PENUMBRA_FRESH_VENV:-0}" == 1 ]]; then
     rm -rf "$VENV"
@@ -31,14 +36,16 @@ fi
 "$VENV/bin/python" -m pip install -q "${PKGS[@]}"
 
 echo "== building the wheel"
-rm -f target/wheels/penumbra-*.whl
-(cd crates/penumbra-py && "$VENV/bin/maturin" build --release -i "$VENV/bin/python" --quiet)
-WHEEL=$(ls target/wheels/penumbra-*.whl | head -n 1)
+rm -rf "$WHEELS"
+(cd crates/penumbra-py && "$VENV/bin/maturin" build --release -i "$VENV/bin/python" --quiet --out "$WHEELS")
+WHEEL=$(ls "$WHEELS"/penumbra-*.whl | head -n 1)
 "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps "$WHEEL"
 
 echo "== pytest"
 # run from outside the source tree so that the installed wheel is tested
-cd "$ROOT/target"
+RUN_DIR=$(mktemp -d)
+trap 'rm -rf "$RUN_DIR"' EXIT
+cd "$RUN_DIR"
 set +e
 "$VENV/bin/python" -m pytest -q -p no:cacheprovider "$ROOT/crates/penumbra-py/tests" "$@"
 status=$?
