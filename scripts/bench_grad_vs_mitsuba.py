@@ -2,7 +2,7 @@
 """Gradient benchmarks: Penumbra beside Mitsuba 3's prb, measured in the same
 run, and the peak memory of Penumbra's reverse mode against path depth.
 
-  1. The jobs of ../shared/reference/scripts/bench.py (128², 64 spp):
+  1. The jobs of scripts/mitsuba/bench.py (128², 64 spp):
        grad_rev_bsdf   reverse mode, dL2/d red.reflectance (cbox, 0.4 grey)
        grad_rev_tex    reverse mode, dL2/d plane texture (textured, 0.5)
        grad_fwd_albedo forward mode, d image / d scale of red.reflectance
@@ -23,8 +23,9 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-KIT = os.path.join(ROOT, '..', 'shared', 'reference')
-EXE = os.path.join(ROOT, 'target', 'release', 'penumbra')
+MITSUBA_BENCH = os.path.join(HERE, 'mitsuba', 'bench.py')
+EXE = os.path.join(os.environ.get('CARGO_TARGET_DIR', os.path.join(ROOT, 'target')),
+                   'release', 'penumbra')
 
 
 def last_json(out, prefix=''):
@@ -81,7 +82,7 @@ def main():
         if a.no_mitsuba:
             mi = {'first_s': float('nan'), 'warm_median_s': float('nan')}
         else:
-            out = subprocess.run([a.mitsuba_python, os.path.join(KIT, 'scripts', 'bench.py'), name,
+            out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
                                   '--spp', '64', '--reps', r], capture_output=True, text=True, env=env)
             mi = last_json(out.stdout, 'RESULT ')
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '

@@ -5,7 +5,7 @@ same run (the machine is noisy: compare ratios, not seconds).
 For each scene (256², 64 spp by default) it runs, each in its own process:
   - `penumbra bench` (first render and warm median, peak RSS),
   - Mitsuba 3 llvm_ad_rgb (first call = JIT compile + render, warm median)
-    and scalar_rgb, through ../shared/reference/scripts/bench.py,
+    and scalar_rgb, through scripts/mitsuba/bench.py,
 and prints a Markdown table with the ratios Mitsuba / Penumbra (> 1: we are
 faster).
 
@@ -20,7 +20,8 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-KIT = os.path.join(ROOT, '..', 'shared', 'reference')
+MITSUBA_BENCH = os.path.join(HERE, 'mitsuba', 'bench.py')
+TARGET = os.environ.get('CARGO_TARGET_DIR', os.path.join(ROOT, 'target'))
 
 
 def run_json(cmd, env=None, prefix=''):
@@ -43,18 +44,17 @@ def main():
     ap.add_argument('--no-scalar', action='store_true', help='skip Mitsuba scalar_rgb (slow)')
     a = ap.parse_args()
     subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
-    exe = os.path.join(ROOT, 'target', 'release', 'penumbra')
+    exe = os.path.join(TARGET, 'release', 'penumbra')
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
     rows = []
     for s in a.scenes:
         ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
                          '--reps', str(a.reps)])
-        bench = os.path.join(KIT, 'scripts', 'bench.py')
-        llvm = run_json([a.mitsuba_python, bench, 'fwd', '--scene', s, '--variant', 'llvm_ad_rgb',
+        llvm = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'llvm_ad_rgb',
                          '--spp', str(a.spp), '--reps', str(a.reps)], env, 'RESULT ')
         scalar = None if a.no_scalar else run_json(
-            [a.mitsuba_python, bench, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
+            [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
              '--spp', str(a.spp), '--reps', '1'], env, 'RESULT ')
         rows.append((s, ours, llvm, scalar))
         print(f'{s}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} warm {llvm["warm_median_s"]:.3f}',

@@ -12,10 +12,11 @@ use penumbra::geometry::{ply, Accel, Mesh, MeshOptions, Ray, Shape};
 use penumbra::math::Transform;
 use penumbra::params::ParamStore;
 use std::hint::black_box;
-use std::path::Path;
+use std::path::PathBuf;
 use std::time::Instant;
 
-const MESH: &str = "/work/shared/reference/scenes/meshes/displaced_sphere.ply";
+/// The bundled mesh (scenes/meshes/), relative to the repository root.
+const MESH: &str = "scenes/meshes/displaced_sphere.ply";
 
 fn camera_rays(n_side: usize) -> Vec<Ray> {
     let eye = Vec3::new(0.3, 1.5, 3.5);
@@ -42,12 +43,11 @@ fn camera_rays(n_side: usize) -> Vec<Ray> {
 }
 
 fn bench(c: &mut Criterion) {
-    if !Path::new(MESH).exists() {
-        eprintln!("{MESH} not found; skipping");
-        return;
-    }
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(MESH);
     let t0 = Instant::now();
-    let data = ply::load_ply(Path::new(MESH)).expect("reference mesh loads");
+    let data = ply::load_ply(&path).unwrap_or_else(|e| panic!("{MESH}: {e}"));
     let mut store = ParamStore::new();
     let mesh = Mesh::new(
         "ply",

@@ -1,9 +1,27 @@
 //! Test utilities shared by the plugin tests: a Pearson χ² goodness-of-fit
 //! test of direction samplers against their densities, as used by pbrt and
-//! Mitsuba to validate importance sampling.
+//! Mitsuba to validate importance sampling, and the lookup of the
+//! repository's test data.
 
 use glam::{Vec2, Vec3};
 use std::f64::consts::PI;
+use std::path::PathBuf;
+
+/// A data file of the repository (`rel` is relative to its root, e.g.
+/// `scenes/meshes/icosphere3.ply`). Panics naming the file when it is
+/// missing: a test without its data fails, it never skips.
+pub fn repo_file(rel: &str) -> PathBuf {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(rel);
+    assert!(
+        p.exists(),
+        "test data {} is missing (expected at {}); it is part of the repository",
+        rel,
+        p.display()
+    );
+    p
+}
 
 /// A small deterministic generator for tests (PCG32, O'Neill 2014).
 pub struct Pcg32 {

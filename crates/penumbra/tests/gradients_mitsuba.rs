@@ -1,5 +1,5 @@
-//! Derivatives against Mitsuba 3's references (../shared/reference, copied
-//! to scenes/refs): forward mode on cbox (d image / d scale of the red
+//! Derivatives against Mitsuba 3's references (the project's reference kit,
+//! copied to scenes/refs; see scenes/README.md): forward mode on cbox (d image / d scale of the red
 //! wall's reflectance), reverse mode on cbox (dL/d red reflectance at 0.4
 //! grey) and on textured (dL/d plane texture at 0.5). Each estimate is
 //! made over independent batches; agreement is judged against the

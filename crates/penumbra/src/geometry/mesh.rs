@@ -777,31 +777,21 @@ mod tests {
         assert!((got - want[1]).length() < 1e-6);
     }
 
-    const REF: &str = "/work/shared/reference/scenes/meshes";
-
-    fn load_ref(name: &str) -> Option<(Mesh, ParamStore)> {
-        let p = std::path::Path::new(REF).join(name);
-        if !p.exists() {
-            eprintln!("skipping: {} not present", p.display());
-            return None;
-        }
+    fn load_ref(name: &str) -> (Mesh, ParamStore) {
+        let p = crate::testing::repo_file(&format!("scenes/meshes/{name}"));
         let data = crate::geometry::ply::load_ply(&p).unwrap();
-        Some(build(data).unwrap())
+        build(data).unwrap()
     }
 
     #[test]
     fn reference_meshes_load() {
-        if let Some((m, s)) = load_ref("icosphere3.ply") {
-            assert_eq!((m.vertex_count(&s), m.face_count()), (642, 1280));
-            assert!(m.normals.is_some() && m.texcoords.is_none());
-        }
-        if let Some((m, s)) = load_ref("displaced_sphere.ply") {
-            assert_eq!((m.vertex_count(&s), m.face_count()), (163_842, 327_680));
-        }
+        let (m, s) = load_ref("icosphere3.ply");
+        assert_eq!((m.vertex_count(&s), m.face_count()), (642, 1280));
+        assert!(m.normals.is_some() && m.texcoords.is_none());
+        let (m, s) = load_ref("displaced_sphere.ply");
+        assert_eq!((m.vertex_count(&s), m.face_count()), (163_842, 327_680));
         for name in ["plane_uv.ply", "uv_sphere.ply"] {
-            if let Some((m, _)) = load_ref(name) {
-                assert!(m.texcoords.is_some(), "{name}");
-            }
+            assert!(load_ref(name).0.texcoords.is_some(), "{name}");
         }
     }
 }

@@ -2,7 +2,7 @@
 //! once (objects referenced from several places are shared), wires shapes
 //! to their BSDFs and area emitters, and builds the acceleration structure.
 
-use super::{Class, LoadContext, Node, Scene, ShapeInfo};
+use super::{Class, LoadContext, Node, Prop, Scene, ShapeInfo, Value};
 use crate::bsdf::Bsdf;
 use crate::emitter::{Emitter, EmitterT};
 use crate::error::Result;
@@ -43,16 +43,24 @@ impl Builder {
     }
 
     /// The BSDF of a shape that names none: Mitsuba's default, a diffuse
-    /// with reflectance 0.5.
+    /// with reflectance 0.5, or 0 when the shape is an area light (so that
+    /// lights do not reflect, as in Mitsuba 3).
     fn default_bsdf(&mut self, shape: &Node) -> Result<u32> {
-        let node = Rc::new(Node::new(
+        let mut node = Node::new(
             Class::Bsdf,
             "diffuse",
             None,
             format!("{}.bsdf", shape.key),
             shape.loc.clone(),
-        ));
-        self.bsdf(&node)
+        );
+        if shape.child("emitter")?.is_some() {
+            node.props.push(Prop::new(
+                "reflectance",
+                Value::Float(0.0),
+                shape.loc.clone(),
+            ));
+        }
+        self.bsdf(&Rc::new(node))
     }
 
     fn emitter(&mut self, node: &Node, shape: Option<u32>) -> Result<u32> {
@@ -189,5 +197,37 @@ impl Scene {
             })),
             accel,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Scene;
+    use std::path::Path;
+
+    #[test]
+    fn default_bsdf_is_black_on_area_lights_only() {
+        let scene = Scene::load_str(
+            r#"<scene version="3.0.0">
+                <sensor type="perspective"/>
+                <shape type="rectangle" id="light"><emitter type="area"/></shape>
+                <shape type="rectangle" id="wall"/>
+            </scene>"#,
+            Path::new("t.xml"),
+            &[],
+        )
+        .unwrap();
+        let value = |key: &str| {
+            scene
+                .params
+                .data(scene.params.require(key).unwrap())
+                .to_vec()
+        };
+        assert!(value("light.bsdf.reflectance.value")
+            .iter()
+            .all(|&v| v == 0.0));
+        assert!(value("wall.bsdf.reflectance.value")
+            .iter()
+            .all(|&v| v == 0.5));
     }
 }

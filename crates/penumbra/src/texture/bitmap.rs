@@ -468,11 +468,8 @@ mod tests {
 
     #[test]
     fn reads_the_reference_scene_texture() {
-        let p = std::path::Path::new("/work/shared/reference/scenes/textures/texture.exr");
-        if !p.is_file() {
-            return;
-        }
-        let img = read_image(p).unwrap();
+        let p = crate::testing::repo_file("scenes/textures/texture.exr");
+        let img = read_image(&p).unwrap();
         let node = test_node(
             Class::Texture,
             "bitmap",

@@ -93,6 +93,89 @@ mod tests {
     use crate::scene::{Class, Value};
     use crate::texture::{si_at_uv, test_node};
 
+    /// A checkerboard with distinct RGB colours and
+    /// `to_uv` = translate(0.1, −0.3) · scale(3, 2), so that uv ↦ (3u + 0.1,
+    /// 2v − 0.3).
+    fn shifted_board(ctx: &mut LoadContext) -> Texture {
+        let m = glam::Mat4::from_translation(glam::Vec3::new(0.1, -0.3, 0.0))
+            * glam::Mat4::from_scale(glam::Vec3::new(3.0, 2.0, 1.0));
+        let node = test_node(
+            Class::Texture,
+            "checkerboard",
+            "c",
+            vec![
+                ("color0", Value::Rgb(glam::Vec3::new(0.9, 0.5, 0.1))),
+                ("color1", Value::Rgb(glam::Vec3::new(0.2, 0.3, 0.7))),
+                (
+                    "to_uv",
+                    Value::Transform(crate::math::Transform::new(m).unwrap()),
+                ),
+            ],
+        );
+        Texture::from_node(&node, ctx).unwrap()
+    }
+
+    #[test]
+    fn matches_the_parity_formula() {
+        // Independent statement of Mitsuba's rule: with (s, t) the uv after
+        // to_uv, color0 covers the half-unit squares whose indices
+        // ⌊2s⌋ + ⌊2t⌋ are even.
+        let mut ctx = LoadContext::default();
+        let t = shifted_board(&mut ctx);
+        let (c0, c1) = (
+            glam::Vec3::new(0.9, 0.5, 0.1),
+            glam::Vec3::new(0.2, 0.3, 0.7),
+        );
+        let mut rng = crate::testing::Pcg32::new(7);
+        let mut n0 = 0;
+        for _ in 0..2000 {
+            let (u, v) = (rng.next_f32() * 4.0 - 2.0, rng.next_f32() * 4.0 - 2.0);
+            let (s, tt) = (3.0 * u as f64 + 0.1, 2.0 * v as f64 - 0.3);
+            let (i, j) = ((2.0 * s).floor() as i64, (2.0 * tt).floor() as i64);
+            // skip points within rounding distance of an edge
+            if ((2.0 * s) - (2.0 * s).round()).abs() < 1e-4
+                || ((2.0 * tt) - (2.0 * tt).round()).abs() < 1e-4
+            {
+                continue;
+            }
+            let want = if (i + j).rem_euclid(2) == 0 { c0 } else { c1 };
+            n0 += usize::from(want == c0);
+            let got = t.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val();
+            assert!(
+                (got - want).abs().max_element() < 1e-6,
+                "uv ({u}, {v}): {got} vs {want}"
+            );
+        }
+        assert!((900..1100).contains(&n0), "{n0} of 2000 points on color0");
+    }
+
+    #[test]
+    fn region_mean_is_the_area_fraction() {
+        // Over uv ∈ [0, ¾]² (default to_uv) the squares are [0,½]² (color0,
+        // area ¼), [½,¾]×[0,½] and [0,½]×[½,¾] (color1, ⅛ each) and [½,¾]²
+        // (color0, 1/16): color0 covers (¼ + 1/16) / (9/16) = 5/9.
+        let node = test_node(Class::Texture, "checkerboard", "c", vec![]);
+        let mut ctx = LoadContext::default();
+        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let n = 300; // cell 1/400: the edge at ½ falls between cells
+        let mut sum = 0.0f64;
+        for j in 0..n {
+            for i in 0..n {
+                let (u, v) = (
+                    0.75 * (i as f32 + 0.5) / n as f32,
+                    0.75 * (j as f32 + 0.5) / n as f32,
+                );
+                sum += t.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val().x as f64;
+            }
+        }
+        let want = 5.0 / 9.0 * 0.4 + 4.0 / 9.0 * 0.2;
+        assert!(
+            (sum / (n * n) as f64 - want).abs() < 1e-6,
+            "{} vs {want}",
+            sum / (n * n) as f64
+        );
+    }
+
     #[test]
     fn pattern_defaults_and_eval_1() {
         let node = test_node(Class::Texture, "checkerboard", "c", vec![]);
