@@ -185,6 +185,7 @@ fn backward_pass(
     opts: &RenderOptions,
 ) -> Result<Vec<Vec<f64>>> {
     let layout = SampleLayout::new(scene, opts)?;
+    layout.check_memory(scene, opts, 3, true)?;
     let filter = &layout.sensor.film.rfilter;
     let (cw, ch) = layout.size();
 
