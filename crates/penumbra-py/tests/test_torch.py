@@ -109,3 +109,20 @@ def test_torch_optimizer_loop_recovers_a_reflectance():
     err0 = np.abs(0.5 - truth).max()
     err = np.abs(torch.sigmoid(latent).detach().numpy() - truth).max()
     assert err < 0.2 * err0, (err, err0)
+
+
+def test_backward_uses_a_decorrelated_seed_unless_told(scene):
+    w = np.random.default_rng(2).normal(size=(12, 12, 3)).astype(np.float32)
+
+    def torch_grad(**kw):
+        x = torch.tensor([0.4, 0.5, 0.6], requires_grad=True)
+        img = pt.render(scene, {KEY: x}, spp=2, seed=3, **kw)
+        (img * torch.from_numpy(w)).sum().backward()
+        return x.grad.numpy()
+
+    def numpy_grad(seed_grad):
+        return pn.render_backward(scene, w, spp=2, keys=[KEY], seed_grad=seed_grad)[KEY]
+
+    assert np.array_equal(torch_grad(), numpy_grad(pn.gradient_seed(3)))
+    assert np.array_equal(torch_grad(seed_grad=3), numpy_grad(3))
+    assert not np.array_equal(torch_grad(), torch_grad(seed_grad=3))

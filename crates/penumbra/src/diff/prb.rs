@@ -108,7 +108,8 @@ impl PathSink<Var> for Replay<'_> {
 }
 
 /// Gradients of a loss with respect to scene parameters, given
-/// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major),
+/// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major;
+/// any other length is an error naming both shapes),
 /// by path replay with the same random numbers as
 /// [`crate::integrator::render`] with the same options. `keys` selects
 /// the parameters (default: every differentiable, non-geometric one).
@@ -125,10 +126,16 @@ pub fn render_backward(
     };
     let (cw, ch) = scene.sensor(opts.sensor)?.film.crop_size;
     if d_image.len() != cw * ch * 3 {
+        let n = d_image.len();
+        let got = if n % (cw * ch) == 0 {
+            format!("{ch}×{cw}×{}", n / (cw * ch))
+        } else {
+            format!("{n} values")
+        };
         return Err(Error::Invalid(format!(
-            "the image gradient must have {ch}x{cw}x3 = {} values (the rendered image's shape), got {}",
-            cw * ch * 3,
-            d_image.len()
+            "the adjoint image (∂loss/∂image) is {got}, but the film's image is {ch}×{cw}×3 \
+             (height × width × RGB, {} values); pass one value per pixel and colour channel",
+            cw * ch * 3
         )));
     }
     if let Some(i) = d_image.iter().position(|v| !v.is_finite()) {
@@ -252,4 +259,35 @@ fn backward_pass(
         }
     }
     Ok(sums)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn an_adjoint_of_another_shape_is_an_error_naming_both_shapes() {
+        let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
+        let d = [("res".to_string(), "8".to_string())];
+        let mut scene = Scene::load_file(&cbox, &d).unwrap();
+        let opts = RenderOptions {
+            spp: Some(1),
+            ..Default::default()
+        };
+        let keys = ["red.reflectance.value"];
+        for (len, got) in [(8 * 8 * 4, "8×8×4"), (8 * 8 * 3 + 1, "193 values")] {
+            let e = render_backward(&mut scene, &vec![1.0; len], Some(&keys), &opts)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!(
+                    "the adjoint image (∂loss/∂image) is {got}, but the film's image is 8×8×3"
+                )),
+                "{e}"
+            );
+        }
+        let g = render_backward(&mut scene, &[1.0; 8 * 8 * 3], Some(&keys), &opts).unwrap();
+        assert_eq!(g.entries.len(), 1);
+    }
 }
