@@ -35,8 +35,9 @@ def test_gradcheck(scene):
     x = torch.tensor([0.4, 0.5, 0.6], dtype=torch.float64, requires_grad=True)
     tex = torch.tensor(pn.traverse(scene)[TEX], dtype=torch.float64, requires_grad=True)
 
+    # seed_grad = seed: the exact derivative of the rendered estimate
     def f(a, b):
-        return pt.render(scene, {KEY: a, TEX: b}, spp=2, seed=1)
+        return pt.render(scene, {KEY: a, TEX: b}, spp=2, seed=1, seed_grad=1)
 
     assert torch.autograd.gradcheck(f, (x, tex), eps=1e-2, atol=1e-4, rtol=1e-3, fast_mode=True)
 
@@ -46,7 +47,8 @@ def test_gradient_matches_finite_differences_of_a_loss(scene):
     latent = torch.tensor([0.1, -0.3, 0.7], dtype=torch.float64, requires_grad=True)
 
     def loss_of(lat):
-        img = pt.render(scene, {KEY: torch.sigmoid(lat)}, spp=2, seed=1)
+        # seed_grad = seed: the exact derivative of this estimate's loss
+        img = pt.render(scene, {KEY: torch.sigmoid(lat)}, spp=2, seed=1, seed_grad=1)
         return ((img - 0.5 * target) ** 2).mean()
 
     loss = loss_of(latent)
