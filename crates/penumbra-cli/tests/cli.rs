@@ -202,6 +202,9 @@ fn commands_write_under_out_by_default_and_keep_stdout_parseable() {
             "{args:?}: {}",
             String::from_utf8_lossy(&o.stderr)
         );
+        if args.contains(&"-q") {
+            assert!(o.stderr.is_empty(), "{args:?} -q wrote to stderr");
+        }
         String::from_utf8(o.stdout).unwrap()
     };
     let key = "red.reflectance.value";
