@@ -260,8 +260,9 @@ fn run(cli: Cli) -> Result<(), String> {
             let output = match output {
                 Some(o) => o,
                 None => {
+                    // the whole stem: "cbox.v2.xml" gives "cbox.v2.exr"
                     let stem = scene_args.scene.file_stem().unwrap_or("render".as_ref());
-                    Path::new("out/render").join(stem).with_extension("exr")
+                    Path::new("out/render").join(format!("{}.exr", stem.to_string_lossy()))
                 }
             };
             let t0 = Instant::now();
