@@ -1,16 +1,18 @@
 //! `penumbra`: render Mitsuba 3 scenes from the command line.
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use penumbra::diff::{check_gradient, render_backward, render_forward, CheckOptions, Estimate};
+use penumbra::diff::{
+    check_gradient, gradient_seed, render_backward, render_forward, CheckOptions, Estimate,
+};
 use penumbra::image::{write_exr, write_png, Image};
-use penumbra::integrator::{render, RenderOptions};
+use penumbra::integrator::{render, ProgressFn, RenderOptions};
 use penumbra::optim::{Job, Loss};
 use penumbra::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[derive(Parser)]
 #[command(
@@ -21,6 +23,44 @@ use std::time::Instant;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// No progress bars or timing reports on stderr (for scripts).
+    #[arg(short, long, global = true)]
+    quiet: bool,
+}
+
+/// The scene and its `-D` overrides.
+#[derive(Args)]
+struct SceneArgs {
+    /// The scene file (Mitsuba 3 XML).
+    scene: PathBuf,
+    /// Override a <default> of the scene: -D name=value (repeatable). A
+    /// name the scene does not know is an error.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    define: Vec<String>,
+}
+
+impl SceneArgs {
+    fn load(&self) -> Result<Scene, String> {
+        let defines = parse_defines(&self.define)?;
+        Scene::load_file(&self.scene, &defines).map_err(|e| e.to_string())
+    }
+}
+
+/// How renders run.
+#[derive(Args)]
+struct RunArgs {
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Render even if the film's buffers would need more memory than is
+    /// available.
+    #[arg(long)]
+    force: bool,
+}
+
+/// `--spp`: at least 1 (the scene's sampler decides when it is not given).
+fn spp_parser() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..)
 }
 
 #[derive(Subcommand)]
@@ -28,34 +68,28 @@ enum Command {
     /// Render a Mitsuba 3 XML scene to an EXR (linear float32, all channels)
     /// or PNG (sRGB, 8-bit) image.
     Render {
-        /// The scene file (Mitsuba 3 XML).
-        scene: PathBuf,
-        /// Output image: .exr or .png.
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Output image: .exr or .png [default: out/render/<scene name>.exr].
         #[arg(short, long)]
-        output: PathBuf,
+        output: Option<PathBuf>,
         /// Samples per pixel (default: the scene's sampler).
-        #[arg(long)]
+        #[arg(long, value_parser = spp_parser())]
         spp: Option<u32>,
         /// Seed of the random numbers.
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Override a <default> of the scene: -D name=value (repeatable).
-        #[arg(short = 'D', value_name = "NAME=VALUE")]
-        define: Vec<String>,
-        /// Worker threads (default: all cores).
-        #[arg(long)]
-        threads: Option<usize>,
-        /// No progress bar or timing report.
-        #[arg(short, long)]
-        quiet: bool,
+        #[command(flatten)]
+        run: RunArgs,
     },
     /// Derivatives of a render: a forward-mode derivative image along the
     /// parameters' own values (d image / d s for θ·s at s = 1), or
     /// reverse-mode gradients of an L2 loss against a target image (of the
     /// image sum without --target).
     Grad {
-        scene: PathBuf,
-        /// Parameter key (repeatable).
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Parameter key (repeatable; `penumbra params SCENE` lists them).
         #[arg(long = "param", required = true)]
         params: Vec<String>,
         /// forward or reverse.
@@ -67,32 +101,37 @@ enum Command {
         /// Set every element of the parameters to this value first.
         #[arg(long)]
         init: Option<f32>,
-        #[arg(long)]
+        /// Samples per pixel (default: the scene's sampler).
+        #[arg(long, value_parser = spp_parser())]
         spp: Option<u32>,
+        /// Seed of the image's random numbers.
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        #[arg(short = 'D', value_name = "NAME=VALUE")]
-        define: Vec<String>,
+        /// Seed of the gradient pass (reverse mode) [default: derived from
+        /// --seed by penumbra::diff::gradient_seed, decorrelated from it].
+        #[arg(long)]
+        seed_grad: Option<u64>,
         /// Output folder (derivative image, gradient images of textures).
-        #[arg(short, long, default_value = "grad")]
+        #[arg(short, long, default_value = "out/grad")]
         output: PathBuf,
         /// Time this many more runs after the first and print a JSON line
         /// with timings and peak memory.
         #[arg(long)]
         reps: Option<usize>,
-        #[arg(long)]
-        threads: Option<usize>,
+        #[command(flatten)]
+        run: RunArgs,
     },
     /// Check derivatives: finite differences (same random numbers) vs
     /// forward mode vs reverse mode, per parameter, over several batches.
     /// Prints a table and writes the derivative images.
     CheckGrad {
-        scene: PathBuf,
+        #[command(flatten)]
+        scene: SceneArgs,
         /// Parameter key (repeatable), e.g. red.reflectance.value.
         #[arg(long = "param", required = true)]
         params: Vec<String>,
         /// Samples per pixel of each batch.
-        #[arg(long, default_value_t = 16)]
+        #[arg(long, default_value_t = 16, value_parser = spp_parser())]
         spp: u32,
         /// Independent batches for the error bars.
         #[arg(long, default_value_t = 4)]
@@ -101,33 +140,33 @@ enum Command {
         #[arg(long, default_value_t = 1e-2)]
         eps: f32,
         /// Folder for the derivative images (EXR).
-        #[arg(short, long, default_value = "check-grad")]
+        #[arg(short, long, default_value = "out/check-grad")]
         output: PathBuf,
-        #[arg(short = 'D', value_name = "NAME=VALUE")]
-        define: Vec<String>,
-        #[arg(long)]
-        threads: Option<usize>,
+        #[command(flatten)]
+        run: RunArgs,
     },
     /// Run an inverse-rendering job described in a TOML file: writes progress
     /// images, the final parameters, loss.csv and a loss plot (loss.png).
-    Optimize {
-        job: PathBuf,
-        #[arg(short, long)]
-        quiet: bool,
-    },
+    Optimize { job: PathBuf },
     /// Time renders of a scene in one process: the first render and the
     /// following (warm) ones, with peak memory; prints one JSON line.
     Bench {
-        scene: PathBuf,
-        #[arg(long)]
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Samples per pixel (default: the scene's sampler).
+        #[arg(long, value_parser = spp_parser())]
         spp: Option<u32>,
         /// Warm renders after the first.
         #[arg(long, default_value_t = 3)]
         reps: usize,
-        #[arg(short = 'D', value_name = "NAME=VALUE")]
-        define: Vec<String>,
-        #[arg(long)]
-        threads: Option<usize>,
+        #[command(flatten)]
+        run: RunArgs,
+    },
+    /// List the scene's parameters: key, shape, flags (differentiable,
+    /// discontinuous, read-only), domain and a summary of the value.
+    Params {
+        #[command(flatten)]
+        scene: SceneArgs,
     },
 }
 
@@ -142,20 +181,37 @@ fn parse_defines(defines: &[String]) -> Result<Vec<(String, String)>, String> {
         .collect()
 }
 
-/// A progress bar with ETA over the render's tiles (hidden with --quiet).
-fn progress_bar(quiet: bool) -> Option<ProgressBar> {
+/// A progress bar on stderr (none with --quiet); `{msg}` says what runs.
+fn progress_bar(quiet: bool, len: u64) -> Option<ProgressBar> {
     if quiet {
         return None;
     }
-    let bar = ProgressBar::new(1);
+    let bar = ProgressBar::new(len);
     bar.set_style(
         ProgressStyle::with_template(
-            "{spinner} rendering [{elapsed_precise}] [{wide_bar}] {percent}% (ETA {eta})",
+            "{spinner} {msg} [{elapsed_precise}] [{wide_bar}] {percent}% (ETA {eta})",
         )
         .expect("the progress template is valid")
         .progress_chars("=> "),
     );
+    bar.enable_steady_tick(Duration::from_millis(200));
     Some(bar)
+}
+
+/// Reports a render's tiles on `bar` (the bar's length follows the tiles).
+fn tile_progress(bar: &Option<ProgressBar>) -> Option<Arc<ProgressFn>> {
+    bar.clone().map(|b| {
+        Arc::new(move |done: usize, total: usize| {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }) as Arc<ProgressFn>
+    })
+}
+
+/// Creates `dir` (and its parents).
+fn create_dir(dir: &Path) -> Result<(), String> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("{}: cannot create folder: {e}", dir.display()))
 }
 
 fn write_output(path: &Path, img: &Image, names: &[String]) -> penumbra::Result<()> {
@@ -191,35 +247,44 @@ fn write_output(path: &Path, img: &Image, names: &[String]) -> penumbra::Result<
 }
 
 fn run(cli: Cli) -> Result<(), String> {
+    let quiet = cli.quiet;
+    let err = |e: penumbra::Error| e.to_string();
     match cli.command {
         Command::Render {
-            scene,
+            scene: scene_args,
             output,
             spp,
             seed,
-            define,
-            threads,
-            quiet,
+            run,
         } => {
-            let defines = parse_defines(&define)?;
+            let output = match output {
+                Some(o) => o,
+                None => {
+                    // the whole stem: "cbox.v2.xml" gives "cbox.v2.exr"
+                    let stem = scene_args.scene.file_stem().unwrap_or("render".as_ref());
+                    Path::new("out/render").join(format!("{}.exr", stem.to_string_lossy()))
+                }
+            };
             let t0 = Instant::now();
-            let scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            let scene = scene_args.load()?;
             let t_load = t0.elapsed();
-            let bar = progress_bar(quiet);
+            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+                create_dir(dir)?;
+            }
+            let bar = progress_bar(quiet, 1);
+            if let Some(b) = &bar {
+                b.set_message("rendering");
+            }
             let opts = RenderOptions {
                 spp,
                 seed,
-                threads,
-                progress: bar.clone().map(|b| {
-                    Arc::new(move |done: usize, total: usize| {
-                        b.set_length(total as u64);
-                        b.set_position(done as u64);
-                    }) as Arc<_>
-                }),
+                threads: run.threads,
+                force: run.force,
+                progress: tile_progress(&bar),
                 ..Default::default()
             };
             let t1 = Instant::now();
-            let img = render(&scene, &opts).map_err(|e| e.to_string())?;
+            let img = render(&scene, &opts).map_err(err)?;
             let t_render = t1.elapsed();
             if let Some(b) = bar {
                 b.finish_and_clear();
@@ -230,7 +295,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 channels: img.channels(),
                 data: img.data,
             };
-            write_output(&output, &image, &img.channel_names).map_err(|e| e.to_string())?;
+            write_output(&output, &image, &img.channel_names).map_err(err)?;
             if !quiet {
                 eprintln!(
                     "{}: {}x{}, {} spp, loaded in {:.2} s, rendered in {:.2} s",
@@ -245,21 +310,22 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Command::Grad {
-            scene,
+            scene: scene_args,
             params,
             mode,
             target,
             init,
             spp,
             seed,
-            define,
+            seed_grad,
             output,
             reps,
-            threads,
+            run,
         } => {
-            let defines = parse_defines(&define)?;
-            let mut scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
-            let err = |e: penumbra::Error| e.to_string();
+            if mode != "forward" && mode != "reverse" {
+                return Err(format!("--mode must be forward or reverse, not '{mode}'"));
+            }
+            let mut scene = scene_args.load()?;
             if let Some(v) = init {
                 for key in &params {
                     let id = scene.params.require(key).map_err(err)?;
@@ -268,103 +334,119 @@ fn run(cli: Cli) -> Result<(), String> {
                 }
                 scene.update().map_err(err)?;
             }
-            std::fs::create_dir_all(&output)
-                .map_err(|e| format!("{}: cannot create folder: {e}", output.display()))?;
+            create_dir(&output)?;
             let keys: Vec<&str> = params.iter().map(String::as_str).collect();
             let target = target
                 .map(|t| penumbra::image::read_image(&t))
                 .transpose()
                 .map_err(err)?;
+            let runs = reps.unwrap_or(0) + 1;
+            let bar = progress_bar(quiet, 1);
             let mut times = Vec::new();
-            for i in 0..=reps.unwrap_or(0) {
+            let mut report = Vec::new();
+            for i in 0..runs {
                 let opts = RenderOptions {
                     spp,
                     seed: seed + i as u64,
-                    threads,
+                    threads: run.threads,
+                    force: run.force,
+                    progress: tile_progress(&bar),
                     ..Default::default()
                 };
+                let step = |what: &str| {
+                    if let Some(b) = &bar {
+                        b.set_message(if runs > 1 {
+                            format!("{what} (run {}/{runs})", i + 1)
+                        } else {
+                            what.to_string()
+                        });
+                    }
+                };
                 let t = Instant::now();
-                match mode.as_str() {
-                    "forward" => {
-                        let tangents: Vec<Vec<f32>> = keys
-                            .iter()
-                            .map(|k| {
-                                scene
-                                    .params
-                                    .require(k)
-                                    .map(|id| scene.params.data(id).to_vec())
-                            })
-                            .collect::<Result<_, _>>()
-                            .map_err(err)?;
-                        let pairs: Vec<(&str, &[f32])> = keys
-                            .iter()
-                            .copied()
-                            .zip(tangents.iter().map(Vec::as_slice))
-                            .collect();
-                        let d = render_forward(&mut scene, &pairs, &opts).map_err(err)?;
-                        times.push(t.elapsed().as_secs_f64());
-                        if i == 0 {
-                            let img = Image {
-                                width: d.width,
-                                height: d.height,
-                                channels: 3,
-                                data: d.data,
-                            };
-                            write_exr(&output.join("dimage.exr"), &img, &["R", "G", "B"])
-                                .map_err(err)?;
-                        }
-                    }
-                    "reverse" => {
-                        let img = render(&scene, &opts).map_err(err)?;
-                        let (loss, d_img) = match &target {
-                            Some(t) => Loss::L2.eval(&img.data, &t.data).map_err(err)?,
-                            None => (f64::NAN, vec![1.0; img.data.len()]),
+                if mode == "forward" {
+                    let tangents: Vec<Vec<f32>> = keys
+                        .iter()
+                        .map(|k| {
+                            scene
+                                .params
+                                .require(k)
+                                .map(|id| scene.params.data(id).to_vec())
+                        })
+                        .collect::<Result<_, _>>()
+                        .map_err(err)?;
+                    let pairs: Vec<(&str, &[f32])> = keys
+                        .iter()
+                        .copied()
+                        .zip(tangents.iter().map(Vec::as_slice))
+                        .collect();
+                    step("forward mode");
+                    let d = render_forward(&mut scene, &pairs, &opts).map_err(err)?;
+                    times.push(t.elapsed().as_secs_f64());
+                    if i == 0 {
+                        let img = Image {
+                            width: d.width,
+                            height: d.height,
+                            channels: 3,
+                            data: d.data,
                         };
-                        // decorrelated replay seed, as Mitsuba's seed_grad
-                        let gopts = RenderOptions {
-                            seed: opts.seed ^ 0x9e37_79b9,
-                            ..opts.clone()
-                        };
-                        let g = render_backward(&mut scene, &d_img, Some(&keys), &gopts)
+                        write_exr(&output.join("dimage.exr"), &img, &["R", "G", "B"])
                             .map_err(err)?;
-                        times.push(t.elapsed().as_secs_f64());
-                        if i == 0 {
-                            if target.is_some() {
-                                println!("loss {loss:.6e}");
-                            }
-                            for e in &g.entries {
-                                let sum: f64 = e.data.iter().map(|&v| v as f64).sum();
-                                let head: Vec<String> =
-                                    e.data.iter().take(6).map(|v| format!("{v:.5e}")).collect();
-                                println!(
-                                    "d loss / d {} (shape {:?}): [{}{}], sum {sum:.6e}",
-                                    e.key,
-                                    e.shape,
-                                    head.join(", "),
-                                    if e.data.len() > 6 { ", …" } else { "" }
-                                );
-                                if e.shape.len() == 3 && e.shape[2] <= 3 {
-                                    let img = Image {
-                                        width: e.shape[1],
-                                        height: e.shape[0],
-                                        channels: e.shape[2],
-                                        data: e.data.clone(),
-                                    };
-                                    let names: &[&str] = if e.shape[2] == 1 {
-                                        &["Y"]
-                                    } else {
-                                        &["R", "G", "B"]
-                                    };
-                                    write_exr(&output.join(format!("{}.exr", e.key)), &img, names)
-                                        .map_err(err)?;
-                                }
-                            }
-                        }
                     }
-                    other => {
-                        return Err(format!("--mode must be forward or reverse, not '{other}'"))
+                    continue;
+                }
+                step("rendering");
+                let img = render(&scene, &opts).map_err(err)?;
+                let (loss, d_img) = match &target {
+                    Some(t) => Loss::L2.eval(&img.data, &t.data).map_err(err)?,
+                    None => (f64::NAN, vec![1.0; img.data.len()]),
+                };
+                let gopts = RenderOptions {
+                    seed: seed_grad.unwrap_or_else(|| gradient_seed(opts.seed)),
+                    ..opts.clone()
+                };
+                step("gradients");
+                let g = render_backward(&mut scene, &d_img, Some(&keys), &gopts).map_err(err)?;
+                times.push(t.elapsed().as_secs_f64());
+                if i > 0 {
+                    continue;
+                }
+                // printed once the bar is gone
+                if target.is_some() {
+                    report.push(format!("loss {loss:.6e}"));
+                }
+                for e in &g.entries {
+                    let sum: f64 = e.data.iter().map(|&v| v as f64).sum();
+                    let head: Vec<String> =
+                        e.data.iter().take(6).map(|v| format!("{v:.5e}")).collect();
+                    report.push(format!(
+                        "d loss / d {} (shape {:?}): [{}{}], sum {sum:.6e}",
+                        e.key,
+                        e.shape,
+                        head.join(", "),
+                        if e.data.len() > 6 { ", …" } else { "" }
+                    ));
+                    if e.shape.len() == 3 && e.shape[2] <= 3 {
+                        let img = Image {
+                            width: e.shape[1],
+                            height: e.shape[0],
+                            channels: e.shape[2],
+                            data: e.data.clone(),
+                        };
+                        let names: &[&str] = if e.shape[2] == 1 {
+                            &["Y"]
+                        } else {
+                            &["R", "G", "B"]
+                        };
+                        write_exr(&output.join(format!("{}.exr", e.key)), &img, names)
+                            .map_err(err)?;
                     }
                 }
+            }
+            if let Some(b) = bar {
+                b.finish_and_clear();
+            }
+            for line in report {
+                println!("{line}");
             }
             if reps.is_some() {
                 let mut warm = times[1..].to_vec();
@@ -376,28 +458,24 @@ fn run(cli: Cli) -> Result<(), String> {
                     peak_rss_mb()
                 );
             }
+            if !quiet {
+                eprintln!("images in {}", output.display());
+            }
             Ok(())
         }
         Command::CheckGrad {
-            scene,
+            scene: scene_args,
             params,
             spp,
             batches,
             eps,
             output,
-            define,
-            threads,
+            run,
         } => {
-            let defines = parse_defines(&define)?;
-            let mut scene = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
-            std::fs::create_dir_all(&output)
-                .map_err(|e| format!("{}: cannot create folder: {e}", output.display()))?;
-            let opts = CheckOptions {
-                spp,
-                batches,
-                eps,
-                threads,
-            };
+            let mut scene = scene_args.load()?;
+            create_dir(&output)?;
+            let total = (params.len() * batches as usize) as u64;
+            let bar = progress_bar(quiet, total);
             println!(
                 "d/ds Σ image along θ·(1+s), {batches} batches × {spp} spp (mean ± standard error)"
             );
@@ -406,15 +484,30 @@ fn run(cli: Cli) -> Result<(), String> {
                 "parameter", "finite differences", "forward", "reverse", "z(f,fd)", "z(r,fd)"
             );
             let mut worst = 0.0f64;
-            for key in &params {
-                let r = check_gradient(&mut scene, key, &opts).map_err(|e| e.to_string())?;
+            for (i, key) in params.iter().enumerate() {
+                if let Some(b) = &bar {
+                    b.set_message(format!("checking {key}"));
+                }
+                let opts = CheckOptions {
+                    spp,
+                    batches,
+                    eps,
+                    threads: run.threads,
+                    force: run.force,
+                    progress: bar.clone().map(|b| {
+                        let before = (i * batches as usize) as u64;
+                        Arc::new(move |done: usize, _: usize| b.set_position(before + done as u64))
+                            as Arc<ProgressFn>
+                    }),
+                };
+                let r = check_gradient(&mut scene, key, &opts).map_err(err)?;
                 let fmt = |e: &Estimate| format!("{:.5e} ± {:.1e}", e.mean, e.std_err);
                 let (zf, zr) = (
                     r.forward.z_score(&r.finite_differences),
                     r.reverse.z_score(&r.finite_differences),
                 );
                 worst = worst.max(zf).max(zr);
-                println!(
+                let line = format!(
                     "{:<40} {:>24} {:>24} {:>24} {:>8.2} {:>8.2}",
                     key,
                     fmt(&r.finite_differences),
@@ -423,6 +516,10 @@ fn run(cli: Cli) -> Result<(), String> {
                     zf,
                     zr
                 );
+                match &bar {
+                    Some(b) => b.suspend(|| println!("{line}")),
+                    None => println!("{line}"),
+                }
                 for (name, img) in [("fd", &r.fd_image), ("forward", &r.forward_image)] {
                     let file = output.join(format!("{key}.{name}.exr"));
                     let image = Image {
@@ -431,8 +528,11 @@ fn run(cli: Cli) -> Result<(), String> {
                         channels: 3,
                         data: img.data.clone(),
                     };
-                    write_exr(&file, &image, &["R", "G", "B"]).map_err(|e| e.to_string())?;
+                    write_exr(&file, &image, &["R", "G", "B"]).map_err(err)?;
                 }
+            }
+            if let Some(b) = bar {
+                b.finish_and_clear();
             }
             println!(
                 "derivative images in {}; largest z-score {worst:.2} ({})",
@@ -448,8 +548,8 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Command::Optimize { job, quiet } => {
-            let mut job = Job::load(&job).map_err(|e| e.to_string())?;
+        Command::Optimize { job } => {
+            let mut job = Job::load(&job).map_err(err)?;
             let n = job.spec.iterations as u64;
             let bar = (!quiet).then(|| {
                 let b = ProgressBar::new(n);
@@ -469,7 +569,7 @@ fn run(cli: Cli) -> Result<(), String> {
                         b.set_message(format!("loss {loss:.3e}"));
                     }
                 })
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
             if let Some(b) = bar {
                 b.finish_and_clear();
             }
@@ -486,34 +586,35 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Command::Bench {
-            scene,
+            scene: scene_args,
             spp,
             reps,
-            define,
-            threads,
+            run,
         } => {
-            let defines = parse_defines(&define)?;
             let t0 = Instant::now();
-            let loaded = Scene::load_file(&scene, &defines).map_err(|e| e.to_string())?;
+            let loaded = scene_args.load()?;
             let load_s = t0.elapsed().as_secs_f64();
-            let opts = RenderOptions {
-                spp,
-                threads,
-                ..Default::default()
-            };
+            let bar = progress_bar(quiet, 1);
             let mut times = Vec::with_capacity(reps + 1);
             for i in 0..=reps {
+                if let Some(b) = &bar {
+                    b.set_message(format!("render {}/{}", i + 1, reps + 1));
+                }
+                let opts = RenderOptions {
+                    spp,
+                    seed: i as u64,
+                    threads: run.threads,
+                    force: run.force,
+                    progress: tile_progress(&bar),
+                    ..Default::default()
+                };
                 let t = Instant::now();
-                let img = render(
-                    &loaded,
-                    &RenderOptions {
-                        seed: i as u64,
-                        ..opts.clone()
-                    },
-                )
-                .map_err(|e| e.to_string())?;
+                let img = render(&loaded, &opts).map_err(err)?;
                 times.push(t.elapsed().as_secs_f64());
                 std::hint::black_box(img);
+            }
+            if let Some(b) = bar {
+                b.finish_and_clear();
             }
             let mut warm = times[1..].to_vec();
             warm.sort_by(f64::total_cmp);
@@ -524,11 +625,16 @@ fn run(cli: Cli) -> Result<(), String> {
             };
             println!(
                 "{{\"scene\": \"{}\", \"spp\": {}, \"load_s\": {load_s:.4}, \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
-                scene.display(),
+                scene_args.scene.display(),
                 spp.unwrap_or_else(|| loaded.sensors[0].sampler.sample_count()),
                 times[0],
                 peak_rss_mb()
             );
+            Ok(())
+        }
+        Command::Params { scene: scene_args } => {
+            let scene = scene_args.load()?;
+            print!("{}", scene.params);
             Ok(())
         }
     }

@@ -88,3 +88,207 @@ fn bad_arguments_are_reported() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("x.tiff"));
 }
+
+/// A fresh, empty working directory for one test.
+fn fresh_dir(name: &str) -> PathBuf {
+    let d = out_dir().join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn cbox() -> PathBuf {
+    repo().join("scenes/cbox.xml")
+}
+
+fn run_ok(args: &[&str]) -> String {
+    let o = penumbra().args(args).arg(cbox()).output().unwrap();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8(o.stdout).unwrap()
+}
+
+fn run_err(args: &[&str]) -> (Option<i32>, String) {
+    let o = penumbra().args(args).arg(cbox()).output().unwrap();
+    assert!(!o.status.success(), "{args:?} succeeded");
+    (o.status.code(), String::from_utf8_lossy(&o.stderr).into())
+}
+
+#[test]
+fn unknown_defines_are_errors_listing_the_scenes_defaults() {
+    for cmd in ["render", "params", "bench"] {
+        let (code, err) = run_err(&[cmd, "-q", "-D", "resolution=32"]);
+        assert_eq!(code, Some(1), "{err}");
+        assert!(
+            err.contains("cbox.xml:5: -D resolution=32: the scene has no default 'resolution'; its defaults are: spp, res, max_depth"),
+            "{cmd}: {err}"
+        );
+    }
+}
+
+#[test]
+fn params_lists_every_key_with_shape_flags_and_value() {
+    let out = run_ok(&["params", "-D", "res=8"]);
+    let lines: Vec<&str> = out.lines().collect();
+    let words = |l: &str| l.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert_eq!(words(lines[0]), "key shape flags domain value");
+    let red = lines
+        .iter()
+        .find(|l| l.starts_with("red.reflectance.value "))
+        .expect("red.reflectance.value is listed");
+    assert!(words(red).starts_with("red.reflectance.value [3] differentiable in [0, 1] [0.5"));
+    let box_positions = lines
+        .iter()
+        .find(|l| l.starts_with("small-box.vertex_positions "))
+        .expect("mesh positions are listed");
+    assert!(
+        words(box_positions).contains("[24, 3] differentiable, discontinuous finite min "),
+        "{box_positions}"
+    );
+    // one line per parameter: the same keys as the library's store
+    let scene = penumbra::scene::Scene::load_file(&cbox(), &[]).unwrap();
+    assert_eq!(lines.len(), scene.params.len() + 1);
+}
+
+#[test]
+fn unknown_parameter_keys_point_to_the_params_command() {
+    let (code, err) = run_err(&[
+        "grad",
+        "-q",
+        "-D",
+        "res=8",
+        "--spp",
+        "1",
+        "--param",
+        "red.reflectance.valeu",
+    ]);
+    assert_eq!(code, Some(1));
+    assert!(
+        err.contains("did you mean one of: red.reflectance.value"),
+        "{err}"
+    );
+    assert!(err.contains("`penumbra params SCENE`"), "{err}");
+}
+
+#[test]
+fn spp_zero_is_refused_by_every_command_that_takes_spp() {
+    for cmd in ["render", "grad", "check-grad", "bench"] {
+        let param: &[&str] = if cmd.contains("grad") {
+            &["--param", "red.reflectance.value"]
+        } else {
+            &[]
+        };
+        let (code, err) = run_err(&[&[cmd, "--spp", "0"], param].concat());
+        assert_eq!(code, Some(2), "{cmd}: {err}");
+        assert!(err.contains("invalid value '0' for '--spp"), "{cmd}: {err}");
+    }
+}
+
+#[test]
+fn commands_write_under_out_by_default_and_keep_stdout_parseable() {
+    let cwd = fresh_dir("default-outputs");
+    let run = |args: &[&str]| {
+        let o = penumbra()
+            .current_dir(&cwd)
+            .args(args)
+            .arg(cbox())
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        if args.contains(&"-q") {
+            assert!(o.stderr.is_empty(), "{args:?} -q wrote to stderr");
+        }
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let key = "red.reflectance.value";
+    let small = ["-D", "res=8", "--spp", "1"];
+    for quiet in [true, false] {
+        let q: &[&str] = if quiet { &["-q"] } else { &[] };
+        fn with<'a>(args: &[&'a str], small: &[&'a str], q: &[&'a str]) -> Vec<&'a str> {
+            [args, small, q].concat()
+        }
+        run(&with(&["render"], &small, q));
+        let grad = run(&with(&["grad", "--param", key], &small, q));
+        assert_eq!(grad.lines().count(), 1, "{grad}");
+        assert!(grad.starts_with("d loss / d red.reflectance.value (shape [3]): ["));
+        run(&with(
+            &["grad", "--mode", "forward", "--param", key],
+            &small,
+            q,
+        ));
+        let check = run(&with(
+            &["check-grad", "--batches", "2", "--param", key],
+            &small,
+            q,
+        ));
+        assert!(
+            check.contains("derivative images in out/check-grad"),
+            "{check}"
+        );
+        let bench = run(&with(&["bench", "--reps", "1"], &small, q));
+        assert_eq!(bench.lines().count(), 1, "{bench}");
+        assert!(bench.starts_with("{\"scene\": ") && bench.trim_end().ends_with('}'));
+    }
+    for file in [
+        "out/render/cbox.exr",
+        "out/grad/dimage.exr",
+        "out/check-grad/red.reflectance.value.fd.exr",
+        "out/check-grad/red.reflectance.value.forward.exr",
+    ] {
+        assert!(cwd.join(file).is_file(), "{file} was not written");
+    }
+    let mut top: Vec<String> = std::fs::read_dir(&cwd)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    top.sort();
+    assert_eq!(
+        top,
+        ["out"],
+        "only out/ is written into the working directory"
+    );
+}
+
+#[test]
+#[cfg(target_os = "linux")]
+fn a_film_larger_than_memory_is_refused_fast_with_the_estimate() {
+    let t = std::time::Instant::now();
+    let (code, err) = run_err(&[
+        "render",
+        "-q",
+        "--spp",
+        "1",
+        "-D",
+        "res=100000",
+        "-o",
+        "x.exr",
+    ]);
+    assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
+    assert_eq!(code, Some(1));
+    assert!(err.contains("the film 100000×100000 needs about"), "{err}");
+    assert!(err.contains("GiB are available; pass --force"), "{err}");
+}
+
+#[test]
+fn grad_decorrelates_the_gradient_seed_by_default_and_honours_seed_grad() {
+    let grad = |extra: &[&str]| {
+        let args = [
+            &["grad", "-q", "-D", "res=8", "--spp", "1", "--seed", "5"][..],
+            &["--param", "red.reflectance.value"],
+            extra,
+        ]
+        .concat();
+        run_ok(&args)
+    };
+    let derived = penumbra::diff::gradient_seed(5).to_string();
+    let default = grad(&[]);
+    assert_eq!(default, grad(&["--seed-grad", &derived]));
+    assert_ne!(default, grad(&["--seed-grad", "5"]), "the image's own seed");
+}

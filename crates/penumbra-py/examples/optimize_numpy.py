@@ -50,9 +50,10 @@ def main(argv=None):
         params.update(opt)
         img = pn.render(scene, spp=args.spp, seed=it)
         loss, d_img = pn.losses.mse(img, target)
-        # decorrelated samples for the gradient (as Mitsuba's seed_grad):
-        # E[(I - T) dI] would be biased if both used the same samples
-        grads = pn.render_backward(scene, d_img, spp=args.spp, seed=10_000 + it, keys=[KEY])
+        # the gradient pass replays paths with pn.gradient_seed(it), samples
+        # independent of the image's: E[(I - T) dI] would be biased if both
+        # used the same samples
+        grads = pn.render_backward(scene, d_img, spp=args.spp, seed=it, keys=[KEY])
         opt.step(grads)
         opt[KEY] = np.clip(opt[KEY], 0.0, 1.0)
         if it % 10 == 0 or it == args.iterations - 1:

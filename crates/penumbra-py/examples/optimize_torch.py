@@ -74,7 +74,8 @@ def main(argv=None):
     err0 = float(np.sqrt(np.mean((0.5 - truth) ** 2)))
     for it in range(args.iterations):
         tex = torch.sigmoid(latent)
-        img = pt.render(scene, {KEY: tex}, spp=args.spp, seed=it, seed_grad=100_000 + it)
+        # the backward pass uses pn.gradient_seed(it): decorrelated samples
+        img = pt.render(scene, {KEY: tex}, spp=args.spp, seed=it)
         loss = torch.mean((img - target) ** 2)
         opt.zero_grad()
         loss.backward()

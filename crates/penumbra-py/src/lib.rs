@@ -9,7 +9,7 @@
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
-use penumbra::diff::{render_backward, render_forward};
+use penumbra::diff::{gradient_seed as derive_gradient_seed, render_backward, render_forward};
 use penumbra::image::{self, Image};
 use penumbra::integrator::{render, Integrator, RenderOptions, Rendered};
 use penumbra::params::Domain;
@@ -264,12 +264,19 @@ fn with_integrator<T>(
     }
 }
 
-fn options(spp: Option<u32>, seed: u64, sensor: usize, threads: Option<usize>) -> RenderOptions {
+fn options(
+    spp: Option<u32>,
+    seed: u64,
+    sensor: usize,
+    threads: Option<usize>,
+    force: bool,
+) -> RenderOptions {
     RenderOptions {
         spp,
         seed,
         sensor,
         threads,
+        force,
         ..Default::default()
     }
 }
@@ -393,7 +400,7 @@ impl PyScene {
     }
 
     /// Primal render: `(height, width, channels)` float32.
-    #[pyo3(signature = (spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None))]
+    #[pyo3(signature = (spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &mut self,
@@ -404,10 +411,11 @@ impl PyScene {
         integrator: Option<PyRef<'_, PyIntegrator>>,
         progress: Option<&Bound<'py, PyAny>>,
         threads: Option<usize>,
+        force: bool,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let progress = Progress::from_arg(progress, "render")?;
         refresh(&mut self.inner)?;
-        let opts = options(spp, seed, sensor, threads);
+        let opts = options(spp, seed, sensor, threads, force);
         let r = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             let scene = &*scene;
             run_detached(py, opts, &progress, |o| render(scene, o))
@@ -417,7 +425,7 @@ impl PyScene {
 
     /// Forward mode: the derivative image along the given tangents
     /// (`[(key, flat float32 array)]`), `(height, width, 3)`.
-    #[pyo3(signature = (tangents, spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None))]
+    #[pyo3(signature = (tangents, spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
     #[allow(clippy::too_many_arguments)]
     fn render_forward<'py>(
         &mut self,
@@ -429,6 +437,7 @@ impl PyScene {
         integrator: Option<PyRef<'_, PyIntegrator>>,
         progress: Option<&Bound<'py, PyAny>>,
         threads: Option<usize>,
+        force: bool,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let progress = Progress::from_arg(progress, "render_forward")?;
         let mut owned = Vec::with_capacity(tangents.len());
@@ -437,7 +446,7 @@ impl PyScene {
             owned.push((k.clone(), to_vec(a)));
         }
         refresh(&mut self.inner)?;
-        let opts = options(spp, seed, sensor, threads);
+        let opts = options(spp, seed, sensor, threads, force);
         let r = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             run_detached(py, opts, &progress, |o| {
                 let t: Vec<(&str, &[f32])> = owned
@@ -451,8 +460,9 @@ impl PyScene {
     }
 
     /// Reverse mode (path replay): gradients `{key: array}` of a loss whose
-    /// derivative with respect to the image is `d_image` (height × width × 3).
-    #[pyo3(signature = (d_image, keys=None, spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None))]
+    /// derivative with respect to the image is `d_image` (height × width ×
+    /// 3). `seed` is the gradient pass's own seed, used as given.
+    #[pyo3(signature = (d_image, keys=None, spp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
     #[allow(clippy::too_many_arguments)]
     fn render_backward<'py>(
         &mut self,
@@ -465,6 +475,7 @@ impl PyScene {
         integrator: Option<PyRef<'_, PyIntegrator>>,
         progress: Option<&Bound<'py, PyAny>>,
         threads: Option<usize>,
+        force: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let progress = Progress::from_arg(progress, "render_backward")?;
         if let Some(keys) = &keys {
@@ -474,7 +485,7 @@ impl PyScene {
         }
         let d = to_vec(&d_image);
         refresh(&mut self.inner)?;
-        let opts = options(spp, seed, sensor, threads);
+        let opts = options(spp, seed, sensor, threads, force);
         let grads = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             run_detached(py, opts, &progress, |o| {
                 let k: Option<Vec<&str>> = keys
@@ -488,6 +499,21 @@ impl PyScene {
             out.set_item(e.key, array(py, e.data, e.shape)?)?;
         }
         Ok(out)
+    }
+
+    /// The table of `penumbra params`: key, shape, flags, domain and a
+    /// value summary of `keys` (default: all), one line each.
+    #[pyo3(signature = (keys=None))]
+    fn params_table(&self, keys: Option<Vec<String>>) -> PyResult<String> {
+        let params = &self.inner.params;
+        let ids = match keys {
+            Some(keys) => keys
+                .iter()
+                .map(|k| self.require(k))
+                .collect::<PyResult<Vec<_>>>()?,
+            None => params.iter().map(|(id, _)| id).collect(),
+        };
+        Ok(params.table(&ids))
     }
 
     fn __repr__(&self) -> String {
@@ -532,6 +558,13 @@ fn load_string(
         .detach(|| Scene::load_str(&text, &path, &defines))
         .map_err(to_py)?;
     Ok(PyScene { inner })
+}
+
+/// The gradient pass's seed that follows a render with `seed`, unless
+/// `seed_grad` is given (the library's one rule, `penumbra::diff::gradient_seed`).
+#[pyfunction]
+fn gradient_seed(seed: u64) -> u64 {
+    derive_gradient_seed(seed)
 }
 
 /// Builds the `<integrator>` of a scene text that holds only that.
@@ -620,6 +653,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_file, m)?)?;
     m.add_function(wrap_pyfunction!(load_string, m)?)?;
     m.add_function(wrap_pyfunction!(load_integrator, m)?)?;
+    m.add_function(wrap_pyfunction!(gradient_seed, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

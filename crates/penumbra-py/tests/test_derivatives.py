@@ -7,6 +7,8 @@ seen once), so central differences with step eps have truncation error
 O(eps^2 * I) and rounding error ~ 2^-24 * |I| * spp / eps; both are far
 below the tolerances used (1e-3 of the derivative's scale)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -66,7 +68,7 @@ def test_backward_is_the_transpose_of_forward(scene, key):
     p = pn.traverse(scene)
     rng = np.random.default_rng(5)
     w = rng.normal(size=(20, 20, 3)).astype(np.float32)
-    grads = pn.render_backward(scene, w, spp=SPP, seed=7)
+    grads = pn.render_backward(scene, w, spp=SPP, seed_grad=7)
     assert set(grads) == set(p.differentiable_keys())
     g = grads[key]
     assert g.shape == p.shape(key) and g.dtype == np.float32
@@ -86,8 +88,9 @@ def test_backward_of_a_loss_matches_finite_differences(scene):
     try:
         img = pn.render(scene, spp=SPP, seed=7)
         loss, d_img = pn.losses.mse(img, target)
-        g = pn.render_backward(scene, d_img, spp=SPP, seed=7, keys=[key])[key]
-        assert list(pn.render_backward(scene, d_img, spp=SPP, seed=7, keys=key)) == [key]
+        # seed_grad = the image's seed: the exact derivative of this estimate
+        g = pn.render_backward(scene, d_img, spp=SPP, seed_grad=7, keys=[key])[key]
+        assert list(pn.render_backward(scene, d_img, spp=SPP, seed_grad=7, keys=key)) == [key]
         for i in range(3):
             e = np.zeros(3, np.float32)
             e[i] = EPS
@@ -140,6 +143,9 @@ def test_forward_bad_input(scene, tangents, exc, msg):
     "d_image, kwargs, exc, msg",
     [
         (np.ones((20, 21, 3), np.float32), {}, ValueError, r"expected shape \(20, 20, 3\)"),
+        # an RGBA adjoint for an RGB film
+        (np.ones((20, 20, 4), np.float32), {}, ValueError,
+         r"expected shape \(20, 20, 3\) like the film's image .*got \(20, 20, 4\)"),
         (np.ones((20, 20), np.float32), {}, ValueError, r"expected shape \(20, 20, 3\)"),
         (np.ones((20, 20, 3), np.int32), {}, TypeError, "floating-point"),
         (np.full((20, 20, 3), np.nan, np.float32), {}, ValueError, "non-finite"),
@@ -155,3 +161,34 @@ def test_forward_bad_input(scene, tangents, exc, msg):
 def test_backward_bad_input(scene, d_image, kwargs, exc, msg):
     with pytest.raises(exc, match=msg):
         pn.render_backward(scene, d_image, spp=1, **kwargs)
+
+
+def test_the_gradient_seed_is_decorrelated_by_default_and_can_be_set(scene):
+    key = "ball.bsdf.reflectance.value"
+    w = np.ones((20, 20, 3), np.float32)
+
+    def grad(**kw):
+        return pn.render_backward(scene, w, spp=1, keys=[key], **kw)[key]
+
+    assert pn.gradient_seed(7) != 7
+    default = grad(seed=7)
+    assert np.array_equal(default, grad(seed=7, seed_grad=pn.gradient_seed(7)))
+    assert not np.array_equal(default, grad(seed=7, seed_grad=7)), "the image's own samples"
+    # seed_grad is the replay's seed, whatever the image's seed
+    direct = scene.render_backward(w, keys=[key], spp=1, seed=123)[key]
+    assert np.array_equal(grad(seed=5, seed_grad=123), direct)
+
+
+def test_adjoint_shapes_must_match_the_film():
+    d = small_dict(res=6, spp=1)
+    d["sensor"]["film"] = {"type": "hdrfilm", "width": 6, "height": 4}
+    s = pn.load_dict(d)
+    assert pn.render(s).shape == (4, 6, 3)
+    key = ["ball.bsdf.reflectance.value"]
+    pn.render_backward(s, np.ones((4, 6, 3), np.float32), keys=key)
+    for bad in [(6, 4, 3), (4, 6, 4), (4, 6, 1)]:
+        msg = re.escape("expected shape (4, 6, 3) like the film's image") + ".*" + re.escape(
+            f"got {bad}"
+        )
+        with pytest.raises(ValueError, match=msg):
+            pn.render_backward(s, np.ones(bad, np.float32), keys=key)

@@ -222,3 +222,29 @@ def test_ctrl_c_stops_a_long_render():
     assert proc.returncode == 3, (out, err)
     assert "interrupted" in out
     assert elapsed < 20, elapsed
+
+
+def test_unknown_scene_defaults_are_errors_that_list_the_defaults():
+    msg = "no default 'resolution'; its defaults are: spp, res, max_depth"
+    with pytest.raises(pn.SceneError, match=msg):
+        pn.load_file(CBOX, resolution=32)
+    with pytest.raises(pn.SceneError, match=msg):
+        pn.load_string(CBOX.read_text(), resolution=32)
+    # a name the scene only references as $name is known
+    text = CBOX.read_text()
+    declared = '<default name="max_depth" value="8"/>'
+    assert declared in text
+    pn.load_string(text.replace(declared, ""), max_depth=2)
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="available memory is read from /proc/meminfo"
+)
+def test_a_film_larger_than_memory_is_refused_with_the_estimate():
+    s = pn.load_file(CBOX, res=100000)
+    for call in (
+        lambda: pn.render(s, spp=1),
+        lambda: pn.render_forward(s, {"red.reflectance.value": [1, 0, 0]}, spp=1),
+    ):
+        with pytest.raises(ValueError, match=r"the film 100000×100000 needs about .*force=True"):
+            call()

@@ -21,6 +21,20 @@ def test_keys_shapes_flags(cbox):
     assert "red.reflectance.value" in repr(p)
 
 
+def test_printing_traverse_shows_the_params_table(cbox):
+    p = pn.traverse(cbox)
+    lines = repr(p).splitlines()
+    assert lines[0].split() == ["key", "shape", "flags", "domain", "value"]
+    assert len(lines) == len(p) + 1
+    red = next(l for l in lines if l.startswith(RED + " "))
+    assert " ".join(red.split()).startswith(RED + " [3] differentiable in [0, 1] [0.5701, ")
+    pos = next(l for l in lines if l.startswith("small-box.vertex_positions "))
+    assert "differentiable, discontinuous" in pos and "min " in pos and "max " in pos
+    assert str(p) == repr(p)
+    # a restricted view lists its keys only
+    assert len(repr(pn.traverse(cbox).keep([RED])).splitlines()) == 2
+
+
 def test_get_returns_a_copy_shaped_like_the_parameter(cbox):
     p = pn.traverse(cbox)
     v = p[RED]

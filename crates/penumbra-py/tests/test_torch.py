@@ -35,8 +35,9 @@ def test_gradcheck(scene):
     x = torch.tensor([0.4, 0.5, 0.6], dtype=torch.float64, requires_grad=True)
     tex = torch.tensor(pn.traverse(scene)[TEX], dtype=torch.float64, requires_grad=True)
 
+    # seed_grad = seed: the exact derivative of the rendered estimate
     def f(a, b):
-        return pt.render(scene, {KEY: a, TEX: b}, spp=2, seed=1)
+        return pt.render(scene, {KEY: a, TEX: b}, spp=2, seed=1, seed_grad=1)
 
     assert torch.autograd.gradcheck(f, (x, tex), eps=1e-2, atol=1e-4, rtol=1e-3, fast_mode=True)
 
@@ -46,7 +47,8 @@ def test_gradient_matches_finite_differences_of_a_loss(scene):
     latent = torch.tensor([0.1, -0.3, 0.7], dtype=torch.float64, requires_grad=True)
 
     def loss_of(lat):
-        img = pt.render(scene, {KEY: torch.sigmoid(lat)}, spp=2, seed=1)
+        # seed_grad = seed: the exact derivative of this estimate's loss
+        img = pt.render(scene, {KEY: torch.sigmoid(lat)}, spp=2, seed=1, seed_grad=1)
         return ((img - 0.5 * target) ** 2).mean()
 
     loss = loss_of(latent)
@@ -109,3 +111,20 @@ def test_torch_optimizer_loop_recovers_a_reflectance():
     err0 = np.abs(0.5 - truth).max()
     err = np.abs(torch.sigmoid(latent).detach().numpy() - truth).max()
     assert err < 0.2 * err0, (err, err0)
+
+
+def test_backward_uses_a_decorrelated_seed_unless_told(scene):
+    w = np.random.default_rng(2).normal(size=(12, 12, 3)).astype(np.float32)
+
+    def torch_grad(**kw):
+        x = torch.tensor([0.4, 0.5, 0.6], requires_grad=True)
+        img = pt.render(scene, {KEY: x}, spp=2, seed=3, **kw)
+        (img * torch.from_numpy(w)).sum().backward()
+        return x.grad.numpy()
+
+    def numpy_grad(seed_grad):
+        return pn.render_backward(scene, w, spp=2, keys=[KEY], seed_grad=seed_grad)[KEY]
+
+    assert np.array_equal(torch_grad(), numpy_grad(pn.gradient_seed(3)))
+    assert np.array_equal(torch_grad(seed_grad=3), numpy_grad(3))
+    assert not np.array_equal(torch_grad(), torch_grad(seed_grad=3))

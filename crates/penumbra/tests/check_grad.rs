@@ -103,7 +103,7 @@ fn check(scene: &mut Scene, key: &str) -> CheckReport {
         spp: 4,
         batches: 12,
         eps: 1e-2,
-        threads: None,
+        ..Default::default()
     };
     let r = check_gradient(scene, key, &opts).unwrap();
     let (fd, fw, rv) = (r.finite_differences, r.forward, r.reverse);

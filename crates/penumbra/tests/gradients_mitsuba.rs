@@ -38,7 +38,7 @@ fn opts(spp: u32, seed: u64) -> RenderOptions {
 /// the image noise and its derivative's, a bias that falls only as 1/spp.
 fn grad_opts(o: &RenderOptions) -> RenderOptions {
     RenderOptions {
-        seed: o.seed ^ 0x9e37_79b9,
+        seed: penumbra::diff::gradient_seed(o.seed),
         ..o.clone()
     }
 }

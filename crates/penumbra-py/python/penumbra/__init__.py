@@ -12,8 +12,13 @@ port by changing the import::
     d_image = pn.render_forward(scene, {"red.reflectance.value": [1, 0, 0]})
     grads = pn.render_backward(scene, d_loss_d_image)     # {key: array}
 
-Derivatives use the same random numbers as ``render`` with the same
-``spp``/``seed``: they are the exact derivatives of that estimate.
+``render_forward`` uses the same random numbers as ``render`` with the
+same ``spp``/``seed``: it is the exact derivative of that estimate.
+``render_backward`` replays paths with ``seed_grad``, by default
+``gradient_seed(seed)``, decorrelated from the image's samples (as
+Mitsuba's ``seed_grad``): the same samples would bias the gradient of a
+non-linear loss. Pass ``seed_grad=seed`` for the exact derivative of the
+image rendered with ``seed``.
 Geometry parameters (flagged discontinuous) are refused by the derivative
 functions until boundary terms are implemented.
 """
@@ -43,6 +48,7 @@ __all__ = [
     "SceneParameters",
     "Transform4f",
     "ad",
+    "gradient_seed",
     "load_dict",
     "load_file",
     "load_string",
@@ -78,7 +84,9 @@ def _define_value(v):
 
 def load_file(path, **defaults) -> Scene:
     """Loads a Mitsuba 3 XML scene. Keyword arguments override the scene's
-    ``<default name=... value=...>`` entries (``load_file(p, spp=16, res=64)``)."""
+    ``<default name=... value=...>`` entries (``load_file(p, spp=16, res=64)``);
+    a name the scene neither declares nor uses as ``$name`` is a
+    :class:`SceneError` that lists its defaults."""
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise FileNotFoundError(f"{p}: no such scene file")
@@ -188,7 +196,7 @@ def _sensor(sensor):
 
 
 
-def _render_options(spp, seed, sensor, integrator, progress, threads) -> dict:
+def _render_options(spp, seed, sensor, integrator, progress, threads, force) -> dict:
     """The checked keyword arguments shared by the render calls."""
     return dict(
         spp=_spp(spp),
@@ -197,7 +205,41 @@ def _render_options(spp, seed, sensor, integrator, progress, threads) -> dict:
         integrator=_integrator(integrator),
         progress=progress,
         threads=threads,
+        force=bool(force),
     )
+
+
+def gradient_seed(seed) -> int:
+    """The seed of the gradient pass that follows a render with ``seed``
+    when no ``seed_grad`` is given: one rule for the CLI, Python, torch
+    and optimisation jobs (``seed`` with its low 32 bits flipped by
+    ``0x9e3779b9``; distinct from ``seed`` and from every small seed)."""
+    return _core.gradient_seed(_seed(seed))
+
+
+def _adjoint(scene, d_image, sensor) -> np.ndarray:
+    """``d_image`` (numpy array or CPU tensor) as the contiguous float32
+    ``(H, W, 3)`` array of reverse mode. It must have the shape of the
+    film's image: ``(H, W, 3)``, or with an rgba film ``(H, W, 4)`` (alpha
+    does not depend on the parameters reverse mode differentiates, so its
+    entries are ignored) or ``(H, W, 3)``; otherwise the error names both
+    shapes."""
+    h, w = scene.film_size(sensor)
+    channels = 4 if "A" in scene.channel_names(sensor) else 3
+    if hasattr(d_image, "detach") and hasattr(d_image, "device"):
+        if d_image.device.type != "cpu":
+            raise ValueError("d_image is not on the CPU; move it with .cpu()")
+        d_image = d_image.detach().numpy()
+    a = np.asarray(d_image)
+    if not np.issubdtype(a.dtype, np.floating):
+        raise TypeError(f"d_image: expected a floating-point array, got dtype {a.dtype}")
+    if a.shape not in {(h, w, 3), (h, w, channels)}:
+        expected = f"({h}, {w}, {channels})" + (f" or ({h}, {w}, 3)" if channels == 4 else "")
+        raise ValueError(
+            f"d_image: expected shape {expected} like the film's image (height, width, "
+            f"channels), got {a.shape}"
+        )
+    return np.ascontiguousarray(a[:, :, :3], dtype=np.float32)
 
 
 def render(
@@ -209,6 +251,7 @@ def render(
     sensor=0,
     progress=False,
     threads=None,
+    force=False,
 ) -> np.ndarray:
     """Renders ``scene``: a ``(height, width, channels)`` float32 array
     (RGB; RGBA with an ``rgba`` film; AOV channels with the aov integrator).
@@ -218,11 +261,13 @@ def render(
     'max_depth': 3}`` or an :class:`Integrator`) replaces the scene's for
     this call. ``progress=True`` shows a bar on stderr; a callable receives
     ``(done, total)``. Ctrl-C stops the render (``KeyboardInterrupt``).
-    ``params`` is accepted for Mitsuba compatibility and unused.
+    ``params`` is accepted for Mitsuba compatibility and unused. A film
+    whose buffers would exceed the available memory is refused (ValueError
+    with the estimate) unless ``force=True``.
     """
     _check_scene(scene)
     return scene.render(
-        **_render_options(spp, seed, sensor, integrator, progress, threads),
+        **_render_options(spp, seed, sensor, integrator, progress, threads, force),
     )
 
 
@@ -235,6 +280,7 @@ def render_forward(
     sensor=0,
     progress=False,
     threads=None,
+    force=False,
 ) -> np.ndarray:
     """Forward-mode derivative: the image ``dI/dθ · t`` (``(H, W, 3)``
     float32) along the tangent ``t`` given as ``{key: array shaped like the
@@ -250,7 +296,7 @@ def render_forward(
         ts.append((k, as_float_array(v, k, shape, what="tangent").reshape(-1)))
     return scene.render_forward(
         ts,
-        **_render_options(spp, seed, sensor, integrator, progress, threads),
+        **_render_options(spp, seed, sensor, integrator, progress, threads, force),
     )
 
 
@@ -264,35 +310,32 @@ def render_backward(
     sensor=0,
     progress=False,
     threads=None,
+    seed_grad=None,
+    force=False,
 ) -> dict:
     """Reverse-mode derivative (path replay): given ``d_image`` =
-    ∂loss/∂image (``(H, W, 3)``, or ``(H, W, 4)`` with an rgba film, whose
-    alpha entries are ignored), returns ``{key: ∂loss/∂param}`` shaped like
-    the parameters, for ``keys`` (default: every differentiable parameter
-    that is not geometry). Needs the path integrator."""
+    ∂loss/∂image of the image rendered with ``seed`` (``(H, W, 3)``, or
+    ``(H, W, 4)`` with an rgba film, whose alpha entries are ignored; any
+    other shape is an error naming both), returns ``{key: ∂loss/∂param}``
+    shaped like the parameters, for ``keys`` (default: every differentiable
+    parameter that is not geometry). Needs the path integrator.
+
+    The paths are replayed with ``seed_grad``, by default
+    :func:`gradient_seed` ``(seed)``: samples independent of the image's,
+    so that the gradient of a non-linear loss is unbiased. ``seed_grad=seed``
+    gives the exact derivative of the rendered estimate instead."""
     _check_scene(scene)
-    h, w = scene.film_size(_sensor(sensor))
-    if hasattr(d_image, "detach") and hasattr(d_image, "device"):
-        if d_image.device.type != "cpu":
-            raise ValueError("d_image is not on the CPU; move it with .cpu()")
-        d_image = d_image.detach().numpy()
-    a = np.asarray(d_image)
-    if not np.issubdtype(a.dtype, np.floating):
-        raise TypeError(f"d_image: expected a floating-point array, got dtype {a.dtype}")
-    if a.ndim == 3 and a.shape[:2] == (h, w) and a.shape[2] == 4:
-        a = a[:, :, :3]
-    if a.shape != (h, w, 3):
-        raise ValueError(
-            f"d_image: expected shape ({h}, {w}, 3) like the rendered image, got {a.shape}"
-        )
+    a = _adjoint(scene, d_image, _sensor(sensor))
     if keys is not None:
         if isinstance(keys, str):
             keys = [keys]
         keys = list(keys)
+    seed = _seed(seed)
+    seed_grad = gradient_seed(seed) if seed_grad is None else _seed(seed_grad)
     return scene.render_backward(
-        np.ascontiguousarray(a, dtype=np.float32),
+        a,
         keys=keys,
-        **_render_options(spp, seed, sensor, integrator, progress, threads),
+        **_render_options(spp, seed_grad, sensor, integrator, progress, threads, force),
     )
 
 

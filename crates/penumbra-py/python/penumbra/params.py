@@ -159,19 +159,6 @@ class SceneParameters:
         return self._scene.update()
 
     def __repr__(self):
-        rows = []
-        for k in self._keys:
-            i = self.info(k)
-            flags = []
-            if i.differentiable:
-                flags.append("D")
-            if i.discontinuous:
-                flags.append("G")
-            if i.read_only:
-                flags.append("R")
-            rows.append(f"  {k:<44} {str(i.shape):<14} {''.join(flags) or '-':<4} {i.domain}")
-        head = f"  {'key':<44} {'shape':<14} {'flags':<4} domain"
-        return (
-            "SceneParameters[\n" + head + "\n" + "\n".join(rows) + "\n]"
-            "  (flags: D differentiable, G geometry/discontinuous, R read-only)"
-        )
+        """The table of ``penumbra params SCENE``: key, shape, flags,
+        domain and a summary of the value, for the keys of this view."""
+        return self._scene.params_table(self._keys)

@@ -13,8 +13,10 @@
 
 The forward pass writes the tensors' values into the scene and renders;
 the backward pass runs path replay (:func:`penumbra.render_backward`) with
-the same random numbers (unless ``seed_grad`` / ``spp_grad`` say
-otherwise). CPU tensors only.
+``spp_grad`` samples (default ``spp``) and the seed ``seed_grad``, by
+default :func:`penumbra.gradient_seed` ``(seed)``: independent of the
+image's samples, so that gradients of non-linear losses are unbiased.
+CPU tensors only.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from . import Scene, _integrator, _seed, _sensor, _spp, as_float_array
+from . import Scene, _adjoint, _integrator, _seed, _sensor, _spp, as_float_array, gradient_seed
 
 __all__ = ["render", "RenderFunction"]
 
@@ -73,11 +75,8 @@ class RenderFunction(torch.autograd.Function):
         g = grad_output.detach()
         if g.device.type != "cpu":
             raise ValueError("penumbra.torch: the image gradient is not on the CPU")
-        g = g.to(torch.float32).contiguous().numpy()
-        if g.ndim == 3 and g.shape[2] == 4:
-            g = g[:, :, :3]  # alpha does not depend on non-geometric parameters
         grads = scene.render_backward(
-            np.ascontiguousarray(g),
+            _adjoint(scene, g.to(torch.float32), o["sensor"]),
             keys=need,
             spp=o["spp_grad"],
             seed=o["seed_grad"],
@@ -108,9 +107,10 @@ def render(
     """Renders ``scene`` with the parameter values ``params`` = ``{key:
     tensor}`` and returns the image ``(H, W, C)`` as a tensor through which
     gradients flow back into those tensors (float64 if they all are,
-    else float32). ``spp_grad`` / ``seed_grad`` (default: ``spp`` /
-    ``seed``) set the backward pass's samples; equal ones make the
-    gradient the exact derivative of the rendered estimate."""
+    else float32). ``spp_grad`` (default ``spp``) and ``seed_grad``
+    (default :func:`penumbra.gradient_seed` ``(seed)``) set the backward
+    pass's samples; ``seed_grad=seed`` (and equal spp) makes the gradient
+    the exact derivative of the rendered estimate."""
     if not isinstance(scene, Scene):
         raise TypeError(f"expected a penumbra Scene, got {type(scene).__name__}")
     params = {} if params is None else params
@@ -139,7 +139,7 @@ def render(
         spp=_spp(spp),
         seed=_seed(seed),
         spp_grad=_spp(spp_grad if spp_grad is not None else spp),
-        seed_grad=_seed(seed_grad if seed_grad is not None else seed),
+        seed_grad=gradient_seed(seed) if seed_grad is None else _seed(seed_grad),
         sensor=_sensor(sensor),
         integrator=_integrator(integrator),
         progress=progress,

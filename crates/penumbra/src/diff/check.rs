@@ -6,8 +6,9 @@
 
 use super::{render_backward, render_forward};
 use crate::error::{Error, Result};
-use crate::integrator::{render, RenderOptions, Rendered};
+use crate::integrator::{render, ProgressFn, RenderOptions, Rendered};
 use crate::scene::Scene;
+use std::sync::Arc;
 
 /// A mean over batches with its standard error.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,7 +47,7 @@ impl Estimate {
 }
 
 /// Settings of a gradient check.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct CheckOptions {
     /// Samples per pixel of each batch.
     pub spp: u32,
@@ -55,6 +56,10 @@ pub struct CheckOptions {
     /// Relative step of the finite differences.
     pub eps: f32,
     pub threads: Option<usize>,
+    /// Called after each batch with `(batches done, batches)`.
+    pub progress: Option<Arc<ProgressFn>>,
+    /// Passed on to [`RenderOptions::force`].
+    pub force: bool,
 }
 
 impl Default for CheckOptions {
@@ -64,6 +69,8 @@ impl Default for CheckOptions {
             batches: 4,
             eps: 1e-2,
             threads: None,
+            progress: None,
+            force: false,
         }
     }
 }
@@ -122,6 +129,7 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
                 spp: Some(opts.spp),
                 seed: 1000 + b as u64,
                 threads: opts.threads,
+                force: opts.force,
                 ..Default::default()
             };
             // finite differences with identical random numbers
@@ -156,6 +164,9 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
                     .sum(),
             );
             last = Some(f);
+            if let Some(p) = &opts.progress {
+                p(b as usize + 1, opts.batches as usize);
+            }
         }
         Ok(())
     })();

@@ -25,6 +25,7 @@ use crate::math::{Spectrum, V3};
 use crate::params::ParamId;
 use crate::scene::Scene;
 use glam::Vec3;
+use std::borrow::Cow;
 use std::collections::HashMap;
 
 /// Gradients of a loss with respect to scene parameters, shaped like the
@@ -108,7 +109,9 @@ impl PathSink<Var> for Replay<'_> {
 }
 
 /// Gradients of a loss with respect to scene parameters, given
-/// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major),
+/// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major,
+/// or × 4 with an rgba film, whose alpha entries are ignored; any other
+/// length is an error naming both shapes),
 /// by path replay with the same random numbers as
 /// [`crate::integrator::render`] with the same options. `keys` selects
 /// the parameters (default: every differentiable, non-geometric one).
@@ -123,12 +126,34 @@ pub fn render_backward(
             "reverse mode (path replay) needs the path integrator".into(),
         ));
     };
-    let (cw, ch) = scene.sensor(opts.sensor)?.film.crop_size;
+    let film = &scene.sensor(opts.sensor)?.film;
+    let (cw, ch) = film.crop_size;
+    let d_image: Cow<[f32]> = if film.alpha && d_image.len() == cw * ch * 4 {
+        // RGBA: alpha does not depend on the parameters differentiated here
+        Cow::Owned(
+            d_image
+                .chunks_exact(4)
+                .flat_map(|px| [px[0], px[1], px[2]])
+                .collect(),
+        )
+    } else {
+        Cow::Borrowed(d_image)
+    };
     if d_image.len() != cw * ch * 3 {
+        let n = d_image.len();
+        let got = if n % (cw * ch) == 0 {
+            format!("{ch}×{cw}×{}", n / (cw * ch))
+        } else {
+            format!("{n} values")
+        };
+        let film_shape = if film.alpha {
+            format!("{ch}×{cw}×4 (RGBA; or {ch}×{cw}×3 without alpha)")
+        } else {
+            format!("{ch}×{cw}×3 (RGB)")
+        };
         return Err(Error::Invalid(format!(
-            "the image gradient must have {ch}x{cw}x3 = {} values (the rendered image's shape), got {}",
-            cw * ch * 3,
-            d_image.len()
+            "the adjoint image (∂loss/∂image) is {got}, but the film's image is {film_shape}, \
+             height × width × channels; pass one value per pixel and channel"
         )));
     }
     if let Some(i) = d_image.iter().position(|v| !v.is_finite()) {
@@ -160,7 +185,7 @@ pub fn render_backward(
             .collect(),
     };
     scene.params.set_grad_enabled(&ids);
-    let result = backward_pass(scene, &path, d_image, opts);
+    let result = backward_pass(scene, &path, &d_image, opts);
     scene.params.set_grad_enabled(&[]);
     let sums = result?;
     Ok(Gradients {
@@ -185,6 +210,7 @@ fn backward_pass(
     opts: &RenderOptions,
 ) -> Result<Vec<Vec<f64>>> {
     let layout = SampleLayout::new(scene, opts)?;
+    layout.check_memory(scene, opts, 3, true)?;
     let filter = &layout.sensor.film.rfilter;
     let (cw, ch) = layout.size();
 
@@ -251,4 +277,56 @@ fn backward_pass(
         }
     }
     Ok(sums)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn an_adjoint_of_another_shape_is_an_error_naming_both_shapes() {
+        let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
+        let d = [("res".to_string(), "8".to_string())];
+        let mut scene = Scene::load_file(&cbox, &d).unwrap();
+        let opts = RenderOptions {
+            spp: Some(1),
+            ..Default::default()
+        };
+        let keys = ["red.reflectance.value"];
+        for (len, got) in [(8 * 8 * 4, "8×8×4"), (8 * 8 * 3 + 1, "193 values")] {
+            let e = render_backward(&mut scene, &vec![1.0; len], Some(&keys), &opts)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!(
+                    "the adjoint image (∂loss/∂image) is {got}, but the film's image is 8×8×3"
+                )),
+                "{e}"
+            );
+        }
+        let g = render_backward(&mut scene, &[1.0; 8 * 8 * 3], Some(&keys), &opts).unwrap();
+        assert_eq!(g.entries.len(), 1);
+
+        // an rgba film takes its RGBA adjoint (alpha ignored) or an RGB one
+        let text = std::fs::read_to_string(&cbox).unwrap();
+        let rgb_format = "<string name=\"pixel_format\" value=\"rgb\"/>";
+        assert!(text.contains(rgb_format));
+        let text = text.replace(rgb_format, "<string name=\"pixel_format\" value=\"rgba\"/>");
+        let mut rgba = Scene::load_str(&text, &cbox, &d).unwrap();
+        let rgb_adjoint = [0.5f32; 8 * 8 * 3];
+        let rgba_adjoint: Vec<f32> = (0..8 * 8 * 4)
+            .map(|i| if i % 4 == 3 { 7.0 } else { 0.5 })
+            .collect();
+        let a = render_backward(&mut rgba, &rgb_adjoint, Some(&keys), &opts).unwrap();
+        let b = render_backward(&mut rgba, &rgba_adjoint, Some(&keys), &opts).unwrap();
+        assert_eq!(a.entries[0].data, b.entries[0].data);
+        let e = render_backward(&mut rgba, &[1.0; 8 * 8 * 2], Some(&keys), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("is 8×8×2, but the film's image is 8×8×4 (RGBA; or 8×8×3 without alpha)"),
+            "{e}"
+        );
+    }
 }

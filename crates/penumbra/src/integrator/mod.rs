@@ -9,7 +9,7 @@ pub(crate) mod render;
 pub use aov::{AovIntegrator, AovKind};
 pub use direct::DirectIntegrator;
 pub use path::PathIntegrator;
-pub use render::{render, RenderOptions, Rendered};
+pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
 use crate::error::Result;

@@ -31,7 +31,11 @@ pub struct RenderOptions {
     pub sensor: usize,
     /// Worker threads (default: all cores).
     pub threads: Option<usize>,
+    /// Called as tiles finish.
     pub progress: Option<Arc<ProgressFn>>,
+    /// Render even if the film's buffers would need more memory than is
+    /// available (otherwise such a render fails before allocating).
+    pub force: bool,
     /// Set from another thread to stop early; the render then fails with
     /// [`Error::Interrupted`].
     pub cancel: Option<Arc<AtomicBool>>,
@@ -149,6 +153,65 @@ impl<'a> SampleLayout<'a> {
         })
     }
 
+    /// Fails, unless `opts.force`, when the buffers of one pass over the
+    /// film would need more memory than the system has available (Linux;
+    /// elsewhere the check is skipped). `channels` values are splatted per
+    /// sample; `reverse` adds the adjoint image and the gradient sums.
+    pub fn check_memory(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        channels: usize,
+        reverse: bool,
+    ) -> Result<()> {
+        if opts.force {
+            return Ok(());
+        }
+        let Some(available) = available_memory() else {
+            return Ok(());
+        };
+        let need = self.buffer_bytes(scene, channels, reverse);
+        if need <= available as f64 {
+            return Ok(());
+        }
+        let gib = |b: f64| b / (1u64 << 30) as f64;
+        let (w, h) = (self.sensor.film.width, self.sensor.film.height);
+        Err(Error::Invalid(format!(
+            "the film {w}×{h} needs about {:.1} GiB; {:.1} GiB are available; \
+             pass --force (CLI) / force=True (Python) to render anyway",
+            gib(need),
+            gib(available as f64)
+        )))
+    }
+
+    /// A rough estimate of the bytes one pass allocates: the per-tile
+    /// blocks (all alive until they are merged in tile order), the merged
+    /// crop-window block, the developed image, and in reverse mode the
+    /// adjoint image, the filter weights and the gradient sums.
+    fn buffer_bytes(&self, scene: &Scene, channels: usize, reverse: bool) -> f64 {
+        let (cw, ch) = self.size();
+        let crop = cw as f64 * ch as f64;
+        let r = self.region;
+        let tiles = (r.w as f64 / TILE as f64).ceil() * (r.h as f64 / TILE as f64).ceil();
+        let tile_side = (TILE as i64 + 2 * self.margin) as f64;
+        let tile_px = tiles * tile_side * tile_side;
+        // a block holds f64 sums of the channels and of the filter weight
+        let per_px = 8.0 * (channels + 1) as f64;
+        let primal = (tile_px + crop) * per_px + crop * channels as f64 * 4.0;
+        if !reverse {
+            return primal;
+        }
+        let weights = (tile_px + crop) * 8.0;
+        let adjoint = crop * channels as f64 * 4.0;
+        let grads: usize = scene
+            .params
+            .iter()
+            .filter(|(_, p)| p.flags.differentiable)
+            .map(|(_, p)| p.data.len())
+            .sum();
+        weights + adjoint + 16.0 * grads as f64
+    }
+
     /// Crop-window size.
     pub fn size(&self) -> (usize, usize) {
         self.sensor.film.crop_size
@@ -225,6 +288,15 @@ impl<'a> SampleLayout<'a> {
     }
 }
 
+/// Memory the system can still give to this process, in bytes
+/// (`MemAvailable` of /proc/meminfo); `None` where it is not known.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// Runs `sample(ray, stream, out)` for every sample of every pixel of the
 /// sensor's crop window (and its border, with `sample_border`), splats the
 /// `channels` values it writes, and returns the merged crop-window block.
@@ -239,6 +311,7 @@ where
     F: Fn(Ray, &mut SampleStream, &mut [f32]) + Sync,
 {
     let layout = SampleLayout::new(scene, opts)?;
+    layout.check_memory(scene, opts, channels, false)?;
     let filter = &layout.sensor.film.rfilter;
     let m = layout.margin;
     let blocks = layout.map_tiles(opts, |tile| {
@@ -265,4 +338,48 @@ where
         image.accumulate(b);
     }
     Ok(image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+    use std::time::Instant;
+
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn a_film_larger_than_memory_is_refused_before_allocating() {
+        let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
+        let d = [("res".to_string(), "100000".to_string())];
+        let scene = Scene::load_file(&cbox, &d).unwrap();
+        let t = Instant::now();
+        let e = render(&scene, &RenderOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(t.elapsed().as_secs_f64() < 1.0, "{:?}", t.elapsed());
+        assert!(e.contains("the film 100000×100000 needs about"), "{e}");
+        assert!(e.contains("GiB are available"), "{e}");
+        assert!(e.contains("--force") && e.contains("force=True"), "{e}");
+        // forward mode shares the check
+        let mut scene = scene;
+        let e = crate::diff::render_forward(&mut scene, &[], &RenderOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs about"), "{e}");
+    }
+
+    #[test]
+    fn buffer_estimate_covers_the_images_of_a_pass() {
+        let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
+        let d = [("res".to_string(), "64".to_string())];
+        let scene = Scene::load_file(&cbox, &d).unwrap();
+        let layout = SampleLayout::new(&scene, &RenderOptions::default()).unwrap();
+        let primal = layout.buffer_bytes(&scene, 3, false);
+        // at least the merged f64 block and the developed f32 image
+        assert!(primal >= 64.0 * 64.0 * (4.0 * 8.0 + 3.0 * 4.0), "{primal}");
+        // the adjoint image, and the merged weights
+        let reverse = layout.buffer_bytes(&scene, 3, true);
+        assert!(reverse >= 64.0 * 64.0 * (3.0 * 4.0 + 8.0), "{reverse}");
+        assert!(layout.buffer_bytes(&scene, 7, false) > primal);
+    }
 }

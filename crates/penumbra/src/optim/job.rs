@@ -315,7 +315,7 @@ impl Job {
                 // reusing the primal's samples biases E[∂loss/∂θ] by the
                 // covariance of the image noise and its derivative
                 let ro_grad = RenderOptions {
-                    seed: ro.seed ^ 0x9e37_79b9,
+                    seed: crate::diff::gradient_seed(ro.seed),
                     ..ro.clone()
                 };
                 let g = render_backward(scene, &d_img, Some(&keys), &ro_grad)?;

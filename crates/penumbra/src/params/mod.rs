@@ -9,6 +9,7 @@ use crate::ad::Real;
 use crate::error::Error;
 use crate::math::V3;
 use std::collections::HashMap;
+use std::fmt;
 
 /// Index of a parameter in its [`ParamStore`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -197,14 +198,15 @@ impl ParamStore {
             near.truncate(8);
             Error::Param {
                 key: key.to_string(),
-                msg: if near.is_empty() {
-                    "no such parameter (list them with traverse / `penumbra params`)".into()
-                } else {
-                    format!(
-                        "no such parameter; did you mean one of: {}",
-                        near.join(", ")
-                    )
-                },
+                msg: format!(
+                    "no such parameter{}; `penumbra params SCENE` (or `print(pn.traverse(scene))` \
+                     in Python) lists every key",
+                    if near.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; did you mean one of: {}", near.join(", "))
+                    }
+                ),
             }
         })
     }
@@ -230,6 +232,43 @@ impl ParamStore {
             .iter()
             .enumerate()
             .map(|(i, p)| (ParamId(i as u32), p))
+    }
+
+    /// A table of the parameters `ids`: key, shape, flags, domain and a
+    /// summary of the current value (the values themselves up to 4
+    /// elements, else min / mean / max). `penumbra params` and Python's
+    /// `traverse` print it; [`fmt::Display`] shows every parameter.
+    pub fn table(&self, ids: &[ParamId]) -> String {
+        let rows: Vec<[String; 5]> = ids
+            .iter()
+            .map(|&id| {
+                let p = self.get(id);
+                let shape: Vec<String> = p.shape.iter().map(usize::to_string).collect();
+                [
+                    p.key.clone(),
+                    format!("[{}]", shape.join(", ")),
+                    p.flags.to_string(),
+                    p.domain.describe().to_string(),
+                    summarize(&p.data),
+                ]
+            })
+            .collect();
+        let head = ["key", "shape", "flags", "domain", "value"].map(String::from);
+        let mut widths = [0usize; 4];
+        for r in std::iter::once(&head).chain(&rows) {
+            for (w, cell) in widths.iter_mut().zip(r) {
+                *w = (*w).max(cell.chars().count());
+            }
+        }
+        let mut out = String::new();
+        for r in std::iter::once(&head).chain(&rows) {
+            for (w, cell) in widths.iter().zip(r) {
+                out += &format!("{cell:<w$}  ");
+            }
+            out += &r[4];
+            out.push('\n');
+        }
+        out
     }
 
     /// Replaces the values of `key`; checks length, finiteness and domain.
@@ -320,6 +359,55 @@ impl ParamStore {
     }
 }
 
+impl fmt::Display for ParamStore {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ids: Vec<ParamId> = self.iter().map(|(id, _)| id).collect();
+        f.write_str(&self.table(&ids))
+    }
+}
+
+impl fmt::Display for ParamFlags {
+    /// `differentiable`, `differentiable, discontinuous`, `read-only`, or
+    /// `-` for none.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let names: Vec<&str> = [
+            (self.differentiable, "differentiable"),
+            (self.discontinuous, "discontinuous"),
+            (self.read_only, "read-only"),
+        ]
+        .iter()
+        .filter(|(on, _)| *on)
+        .map(|(_, name)| *name)
+        .collect();
+        if names.is_empty() {
+            f.write_str("-")
+        } else {
+            f.write_str(&names.join(", "))
+        }
+    }
+}
+
+/// The values themselves up to 4 elements, else their min / mean / max.
+fn summarize(data: &[f32]) -> String {
+    let num = |v: f64| format!("{v:.4}");
+    if data.len() <= 4 {
+        let v: Vec<String> = data.iter().map(|&v| num(v as f64)).collect();
+        return format!("[{}]", v.join(", "));
+    }
+    let (lo, hi) = data
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let mean = data.iter().map(|&v| v as f64).sum::<f64>() / data.len() as f64;
+    format!(
+        "min {}, mean {}, max {}",
+        num(lo as f64),
+        num(mean),
+        num(hi as f64)
+    )
+}
+
 fn check_domain(key: &str, data: &[f32], domain: Domain) -> Result<(), Error> {
     if let Some(i) = data.iter().position(|&v| !domain.admits(v)) {
         return Err(Error::Param {
@@ -384,5 +472,82 @@ mod tests {
         s.set("a.alpha.value", &[0.3]).unwrap();
         assert_eq!(s.take_dirty().len(), 1);
         assert!(s.take_dirty().is_empty());
+    }
+
+    #[test]
+    fn table_lists_shape_flags_and_a_value_summary() {
+        let mut s = ParamStore::new();
+        s.add(
+            "red.reflectance.value",
+            vec![0.5, 0.25, 0.125],
+            vec![3],
+            ParamFlags::DIFFERENTIABLE,
+            Domain::UnitInterval,
+        )
+        .unwrap();
+        s.add(
+            "mesh.vertex_positions",
+            vec![-1.0, 0.0, 1.0, 2.0, 3.0, 5.0],
+            vec![2, 3],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )
+        .unwrap();
+        s.add(
+            "mesh.faces",
+            vec![0.0; 3],
+            vec![1, 3],
+            ParamFlags::READ_ONLY,
+            Domain::Finite,
+        )
+        .unwrap();
+        let t = s.to_string();
+        let lines: Vec<&str> = t.lines().collect();
+        assert_eq!(lines.len(), 4, "{t}");
+        let words = |l: &str| l.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert_eq!(words(lines[0]), "key shape flags domain value");
+        assert_eq!(
+            words(lines[1]),
+            "red.reflectance.value [3] differentiable in [0, 1] [0.5000, 0.2500, 0.1250]"
+        );
+        assert_eq!(
+            words(lines[2]),
+            "mesh.vertex_positions [2, 3] differentiable, discontinuous finite \
+             min -1.0000, mean 1.6667, max 5.0000"
+        );
+        assert_eq!(
+            words(lines[3]),
+            "mesh.faces [1, 3] read-only finite [0.0000, 0.0000, 0.0000]"
+        );
+        // the columns line up
+        let col = lines[0].find("shape").unwrap();
+        assert!(lines[1..].iter().all(|l| l.as_bytes()[col - 1] == b' '));
+        assert_eq!(lines[1].find("[3]"), Some(col));
+        // a subset
+        let only = s.table(&[s.id("mesh.faces").unwrap()]);
+        assert_eq!(only.lines().count(), 2);
+    }
+
+    #[test]
+    fn unknown_keys_point_to_the_listing_commands() {
+        let mut s = ParamStore::new();
+        s.add(
+            "red.reflectance.value",
+            vec![0.5; 3],
+            vec![3],
+            ParamFlags::DIFFERENTIABLE,
+            Domain::UnitInterval,
+        )
+        .unwrap();
+        for key in ["red.reflectance.valeu", "nothing"] {
+            let e = s.require(key).unwrap_err().to_string();
+            assert!(e.contains("`penumbra params SCENE`"), "{e}");
+            assert!(e.contains("pn.traverse(scene)"), "{e}");
+        }
+        let e = s.require("red.reflectance.valeu").unwrap_err().to_string();
+        assert!(
+            e.contains("did you mean one of: red.reflectance.value"),
+            "{e}"
+        );
     }
 }

@@ -64,9 +64,11 @@ pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Node>>
 pub fn parse_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Rc<Node>> {
     let mut lowerer = Lowerer {
         vars: defines.iter().cloned().collect(),
+        known: Vec::new(),
         include_stack: vec![canonical(path)],
     };
     let root = lowerer.load(text, path)?;
+    lowerer.check_defines(defines, &root.loc)?;
     if root.tag != "scene" {
         return Err(root.err(format!(
             "the root element is <{}>; a scene file's root must be <scene version=\"3.0.0\">",
@@ -186,6 +188,9 @@ fn check_version(scene: &Elem, required: bool) -> Result<()> {
 struct Lowerer {
     /// `$name` values: the defines, then `<default>`s not overridden.
     vars: HashMap<String, String>,
+    /// Variable names the scene knows, in order of first appearance: those
+    /// declared with `<default>` and those referenced as `$name`.
+    known: Vec<String>,
     /// Canonical paths of the files being read (for include cycles).
     include_stack: Vec<PathBuf>,
 }
@@ -264,7 +269,33 @@ impl Lowerer {
         self.vars
             .entry(name.to_string())
             .or_insert_with(|| value.to_string());
+        self.know(name);
         Ok(())
+    }
+
+    fn know(&mut self, name: &str) {
+        if !self.known.iter().any(|k| k == name) {
+            self.known.push(name.to_string());
+        }
+    }
+
+    /// Fails on a define (`-D name=value`, or a keyword argument of the
+    /// Python loaders) that the scene neither declares nor references: a
+    /// typo would otherwise be ignored without a word.
+    fn check_defines(&self, defines: &[(String, String)], loc: &SrcLoc) -> Result<()> {
+        let Some((name, value)) = defines.iter().find(|(name, _)| !self.known.contains(name))
+        else {
+            return Ok(());
+        };
+        let list = if self.known.is_empty() {
+            "it has none".to_string()
+        } else {
+            format!("its defaults are: {}", self.known.join(", "))
+        };
+        Err(Error::scene(
+            loc,
+            format!("-D {name}={value}: the scene has no default '{name}'; {list}"),
+        ))
     }
 
     /// `<include filename="…"/>`: the included file's `<scene>` children (or
@@ -320,7 +351,7 @@ impl Lowerer {
     /// longest defined prefix (Mitsuba substitutes plain substrings, so
     /// `"$res_hi"` with only `res` defined reads `res`). A `$` not followed
     /// by a name stays as is.
-    fn substitute(&self, value: &str, loc: &SrcLoc, what: &str, attr: &str) -> Result<String> {
+    fn substitute(&mut self, value: &str, loc: &SrcLoc, what: &str, attr: &str) -> Result<String> {
         if !value.contains('$') {
             return Ok(value.to_string());
         }
@@ -352,6 +383,7 @@ impl Lowerer {
                 ));
             };
             out.push_str(v);
+            self.know(&name[..l]);
             rest = &after[l..];
         }
         out.push_str(rest);
@@ -899,15 +931,45 @@ mod tests {
 
     #[test]
     fn defines_override_defaults() {
-        let d = [
-            ("spp".to_string(), "16".to_string()),
-            ("unused".to_string(), "1".to_string()),
-        ];
+        let d = [("spp".to_string(), "16".to_string())];
         let root = load_ref("cbox.xml", &d);
         let sampler = child(&child(&root, "sensor"), "sampler");
         assert_eq!(sampler.int("sample_count", 0).unwrap(), 16);
         let film = child(&child(&root, "sensor"), "film");
         assert_eq!(film.int("width", 0).unwrap(), 256);
+    }
+
+    #[test]
+    fn unknown_defines_are_errors_that_list_the_defaults() {
+        let dir = temp_dir("unknown-define");
+        std::fs::write(
+            dir.join("inc.xml"),
+            "<scene version=\"3.0.0\">\n<default name=\"max_depth\" value=\"3\"/>\n</scene>",
+        )
+        .unwrap();
+        let text = "<scene version=\"3.0.0\">\n<default name=\"res\" value=\"8\"/>\n\
+                    <include filename=\"inc.xml\"/>\n\
+                    <bsdf type=\"diffuse\"><float name=\"a\" value=\"$spp\"/></bsdf></scene>";
+        let scene = dir.join("scene.xml");
+        let define = |k: &str, v: &str| vec![(k.to_string(), v.to_string())];
+        // declared here, declared in an include, or only referenced: known
+        for (k, v) in [("res", "4"), ("max_depth", "2"), ("spp", "1")] {
+            let mut d = define(k, v);
+            if k != "spp" {
+                d.extend(define("spp", "1"));
+            }
+            parse_str(text, &scene, &d).unwrap_or_else(|e| panic!("-D {k}: {e}"));
+        }
+        let mut d = define("spp", "1");
+        d.extend(define("resolution", "32"));
+        let e = parse_str(text, &scene, &d).unwrap_err().to_string();
+        assert!(
+            e.contains(
+                "scene.xml:1: -D resolution=32: the scene has no default 'resolution'; \
+                        its defaults are: res, max_depth, spp"
+            ),
+            "{e}"
+        );
     }
 
     #[test]
