@@ -57,3 +57,15 @@ lr = 0.03
         assert!(dir.join("out").join(f).is_file(), "{f} missing");
     }
 }
+
+/// The textured job optimises a bitmap used as a diffuse reflectance: its
+/// texels carry the [0, 1] domain, so every step projects them into it.
+#[test]
+fn textured_job_texels_are_reflectances() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let job = Job::load(&repo.join("scenes/jobs/textured_texture.toml")).unwrap();
+    let store = &job.scene.params;
+    let p = store.get(store.require("plane.bsdf.reflectance.data").unwrap());
+    assert_eq!(p.domain, penumbra::params::Domain::UnitInterval);
+    assert!(p.data.iter().all(|v| (0.0..=1.0).contains(v)));
+}
