@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use penumbra::diff::{check_gradient, render_backward, render_forward, CheckOptions, Estimate};
+use penumbra::image::plot::median;
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::optim::{Job, Loss};
@@ -108,10 +109,15 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
-    /// Run an inverse-rendering job described in a TOML file: writes progress
-    /// images, the final parameters, loss.csv and a loss plot (loss.png).
+    /// Run an inverse-rendering job described in a TOML file: writes the
+    /// target and final images, progress images, the final parameters,
+    /// loss.csv and a loss plot (loss.png).
     Optimize {
         job: PathBuf,
+        /// Output folder (default: the job's `output`, else
+        /// out/optimize/<job name>/).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
         #[arg(short, long)]
         quiet: bool,
     },
@@ -448,8 +454,11 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Command::Optimize { job, quiet } => {
+        Command::Optimize { job, output, quiet } => {
             let mut job = Job::load(&job).map_err(|e| e.to_string())?;
+            if let Some(dir) = output {
+                job.output = dir;
+            }
             let n = job.spec.iterations as u64;
             let bar = (!quiet).then(|| {
                 let b = ProgressBar::new(n);
@@ -473,10 +482,13 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(b) = bar {
                 b.finish_and_clear();
             }
-            let first = result.losses.first().copied().unwrap_or(f64::NAN);
-            let last = result.losses.last().copied().unwrap_or(f64::NAN);
+            // the loss of one step is noisy: report the medians of the
+            // first and the last tenth of the run
+            let l = &result.losses;
+            let tenth = (l.len() / 10).max(1);
+            let (first, last) = (median(&l[..tenth]), median(&l[l.len() - tenth..]));
             println!(
-                "loss {first:.4e} -> {last:.4e} over {} iterations; results in {}",
+                "loss (median of {tenth} steps) {first:.4e} -> {last:.4e} over {} iterations; results in {}",
                 result.losses.len(),
                 result.output.display()
             );
