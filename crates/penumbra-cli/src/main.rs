@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use penumbra::diff::{check_gradient, render_backward, render_forward, CheckOptions, Estimate};
-use penumbra::image::plot::median;
+use penumbra::image::plot::trend;
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::optim::{Job, Loss};
@@ -482,13 +482,13 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(b) = bar {
                 b.finish_and_clear();
             }
-            // the loss of one step is noisy: report the medians of the
-            // first and the last tenth of the run
-            let l = &result.losses;
-            let tenth = (l.len() / 10).max(1);
-            let (first, last) = (median(&l[..tenth]), median(&l[l.len() - tenth..]));
+            // the loss of one step is noisy: report its trend, as loss.png
+            // draws it
+            let t = trend(&result.losses);
+            let first = t.first().copied().unwrap_or(f64::NAN);
+            let last = t.last().copied().unwrap_or(f64::NAN);
             println!(
-                "loss (median of {tenth} steps) {first:.4e} -> {last:.4e} over {} iterations; results in {}",
+                "loss (trend) {first:.4e} -> {last:.4e} over {} iterations; results in {}",
                 result.losses.len(),
                 result.output.display()
             );
