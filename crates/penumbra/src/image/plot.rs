@@ -258,9 +258,16 @@ pub fn plot_curve(values: &[f64], width: usize, height: usize, title: &str, nois
         };
         c.text(left - 8 - 6 * label.len() as i64, y - 3, &label, black);
     }
-    // x ticks: 5 steps
-    for k in 0..=4 {
-        let i = (n * k as f64 / 4.0).round();
+    // x ticks: multiples of a round step (1, 2 or 5 × 10^k), about four
+    let rough = (n / 4.0).max(1.0);
+    let decade = 10f64.powf(rough.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * decade)
+        .find(|&s| s >= rough)
+        .unwrap_or(10.0 * decade);
+    for k in 0..=(n / step).floor() as usize {
+        let i = k as f64 * step;
         let x = px(i);
         c.line((x, bottom), (x, bottom + 4), black);
         let label = format!("{}", i as i64);
