@@ -120,7 +120,7 @@ impl Canvas {
     }
 }
 
-/// Colour of the raw values (faint) and of their moving median (bold).
+/// Colour of the raw values (faint) and of their trend (bold).
 pub const RAW_RGB: [f32; 3] = [0.5, 0.62, 0.92];
 /// See [`RAW_RGB`].
 pub const SMOOTH_RGB: [f32; 3] = [0.05, 0.2, 0.8];

@@ -7,7 +7,7 @@
 //! (`final.exr`, `final.png`, with the target's samples per pixel),
 //! progress images (`iter_<i>.png`), the final parameters (`params.txt`,
 //! EXR for textures), the loss per iteration (`loss.csv`) and a plot of it
-//! (`loss.png`: raw values faint, their moving median bold, log scale; a
+//! (`loss.png`: raw values faint, their trend bold, log scale; a
 //! second panel with the parameter error when the truth is known).
 //!
 //! ```toml
