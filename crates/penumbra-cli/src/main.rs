@@ -5,6 +5,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use penumbra::diff::{
     check_gradient, gradient_seed, render_backward, render_forward, CheckOptions, Estimate,
 };
+use penumbra::image::plot::{median, trend};
 use penumbra::image::{write_exr, write_png, Image};
 use penumbra::integrator::{render, ProgressFn, RenderOptions};
 use penumbra::optim::{Job, Loss};
@@ -145,9 +146,16 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
-    /// Run an inverse-rendering job described in a TOML file: writes progress
-    /// images, the final parameters, loss.csv and a loss plot (loss.png).
-    Optimize { job: PathBuf },
+    /// Run an inverse-rendering job described in a TOML file: writes the
+    /// target and final images, progress images, the final parameters,
+    /// loss.csv and a loss plot (loss.png).
+    Optimize {
+        job: PathBuf,
+        /// Output folder (default: the job's `output`, else
+        /// out/optimize/<job name>/).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Time renders of a scene in one process: the first render and the
     /// following (warm) ones, with peak memory; prints one JSON line.
     Bench {
@@ -449,9 +457,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 println!("{line}");
             }
             if reps.is_some() {
-                let mut warm = times[1..].to_vec();
-                warm.sort_by(f64::total_cmp);
-                let median = warm.get(warm.len() / 2).copied().unwrap_or(f64::NAN);
+                let median = median(&times[1..]);
                 println!(
                     "{{\"mode\": \"{mode}\", \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
                     times[0],
@@ -548,8 +554,11 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Command::Optimize { job } => {
+        Command::Optimize { job, output } => {
             let mut job = Job::load(&job).map_err(err)?;
+            if let Some(dir) = output {
+                job.output = dir;
+            }
             let n = job.spec.iterations as u64;
             let bar = (!quiet).then(|| {
                 let b = ProgressBar::new(n);
@@ -573,10 +582,13 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(b) = bar {
                 b.finish_and_clear();
             }
-            let first = result.losses.first().copied().unwrap_or(f64::NAN);
-            let last = result.losses.last().copied().unwrap_or(f64::NAN);
+            // the loss of one step is noisy: report its trend, as loss.png
+            // draws it
+            let t = trend(&result.losses);
+            let first = t.first().copied().unwrap_or(f64::NAN);
+            let last = t.last().copied().unwrap_or(f64::NAN);
             println!(
-                "loss {first:.4e} -> {last:.4e} over {} iterations; results in {}",
+                "loss (trend) {first:.4e} -> {last:.4e} over {} iterations; results in {}",
                 result.losses.len(),
                 result.output.display()
             );
@@ -616,13 +628,7 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(b) = bar {
                 b.finish_and_clear();
             }
-            let mut warm = times[1..].to_vec();
-            warm.sort_by(f64::total_cmp);
-            let median = if warm.is_empty() {
-                f64::NAN
-            } else {
-                warm[warm.len() / 2]
-            };
+            let median = median(&times[1..]);
             println!(
                 "{{\"scene\": \"{}\", \"spp\": {}, \"load_s\": {load_s:.4}, \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
                 scene_args.scene.display(),

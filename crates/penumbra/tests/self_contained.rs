@@ -78,6 +78,8 @@ fn no_file_reads_or_links_outside_the_repository() {
 #[test]
 fn the_check_sees_a_sibling_shared_folder_and_absolute_paths() {
     assert!(outside_reference("see ../shared/DESIGN.md"));
-    assert!(outside_reference(r#"const P: &str = "/work/shared/assets/museum.exr";"#));
+    assert!(outside_reference(
+        r#"const P: &str = "/work/shared/assets/museum.exr";"#
+    ));
     assert!(!outside_reference("scenes/refs/cbox_ref256.exr"));
 }

@@ -36,15 +36,17 @@ fn derivative_image(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
             "the aov integrator has no derivatives; use path or direct".into(),
         ));
     }
-    let block = render_samples(scene, opts, 3, |ray, rng, out| {
-        if let Some(l) = integrator.radiance::<Dual>(scene, ray, rng) {
-            out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
-        }
-    })?;
+    let (block, non_finite_samples) =
+        render_samples(scene, opts, 3, "forward mode", |ray, rng, out| {
+            if let Some(l) = integrator.radiance::<Dual>(scene, ray, rng) {
+                out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
+            }
+        })?;
     Ok(Rendered {
         width: block.width,
         height: block.height,
         channel_names: vec!["R".into(), "G".into(), "B".into()],
         data: block.develop(),
+        non_finite_samples,
     })
 }

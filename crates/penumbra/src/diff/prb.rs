@@ -19,7 +19,7 @@ use crate::ad::{Real, Var};
 use crate::error::{Error, Result};
 use crate::image::ImageBlock;
 use crate::integrator::path::{Accumulate, PathSink};
-use crate::integrator::render::SampleLayout;
+use crate::integrator::render::{report_non_finite, SampleLayout};
 use crate::integrator::{Integrator, RenderOptions};
 use crate::math::{Spectrum, V3};
 use crate::params::ParamId;
@@ -33,6 +33,10 @@ use std::collections::HashMap;
 #[derive(Clone, Debug, Default)]
 pub struct Gradients {
     pub entries: Vec<GradEntry>,
+    /// Samples left out because their radiance or one of their gradient
+    /// contributions was NaN or infinite (reported once per call with
+    /// [`crate::warn()`]).
+    pub non_finite_samples: usize,
 }
 
 #[derive(Clone, Debug)]
@@ -55,6 +59,10 @@ impl Gradients {
 /// order so the result does not depend on the thread count.
 type TileGrads = HashMap<(u32, u32), f64>;
 
+/// The gradient contributions of one sample, (parameter, element, value),
+/// kept apart until the sample is known to be finite.
+type SampleGrads = Vec<(u32, u32, f64)>;
+
 /// The path-replay sink: records one vertex at a time and backpropagates.
 struct Replay<'a> {
     /// Radiance of the path still to come (primal).
@@ -63,7 +71,7 @@ struct Replay<'a> {
     delta: Vec3,
     /// This vertex's radiance contributions, recorded.
     local: Spectrum<Var>,
-    grads: &'a mut TileGrads,
+    grads: &'a mut SampleGrads,
 }
 
 impl PathSink<Var> for Replay<'_> {
@@ -102,7 +110,7 @@ impl PathSink<Var> for Replay<'_> {
                 (objective.y, self.delta.y),
                 (objective.z, self.delta.z),
             ],
-            |id, i, g| *grads.entry((id.0, i as u32)).or_default() += g as f64,
+            |id, i, g| grads.push((id.0, i as u32, g as f64)),
         );
         self.local = Spectrum::zero();
     }
@@ -187,8 +195,9 @@ pub fn render_backward(
     scene.params.set_grad_enabled(&ids);
     let result = backward_pass(scene, &path, &d_image, opts);
     scene.params.set_grad_enabled(&[]);
-    let sums = result?;
+    let (sums, non_finite_samples) = result?;
     Ok(Gradients {
+        non_finite_samples,
         entries: ids
             .iter()
             .map(|&id| {
@@ -208,7 +217,7 @@ fn backward_pass(
     path: &crate::integrator::PathIntegrator,
     d_image: &[f32],
     opts: &RenderOptions,
-) -> Result<Vec<Vec<f64>>> {
+) -> Result<(Vec<Vec<f64>>, usize)> {
     let layout = SampleLayout::new(scene, opts)?;
     layout.check_memory(scene, opts, 3, true)?;
     let filter = &layout.sensor.film.rfilter;
@@ -235,6 +244,8 @@ fn backward_pass(
     // 2. replay every sample with its adjoint radiance
     let tiles = layout.map_tiles(opts, |tile| {
         let mut grads = TileGrads::new();
+        let mut sample_grads = SampleGrads::new();
+        let mut non_finite = 0usize;
         let mut delta = [0.0f32; 3];
         layout.for_each_sample(tile, |pos, ray, rng| {
             weights.gather_adjoint(filter, pos.x, pos.y, d_image, &mut delta);
@@ -245,18 +256,27 @@ fn backward_pass(
             let mut primal = Accumulate(Spectrum::<f32>::zero());
             path.trace(scene, ray, rng, &mut primal);
             if !primal.0.is_finite() {
+                non_finite += 1;
                 return;
             }
             clear_tape();
+            sample_grads.clear();
             let mut replay = Replay {
                 l_rem: primal.0.val(),
                 delta: Vec3::from(delta),
                 local: Spectrum::zero(),
-                grads: &mut grads,
+                grads: &mut sample_grads,
             };
             path.trace::<Var, _>(scene, ray, &mut replay_rng, &mut replay);
+            if sample_grads.iter().all(|g| g.2.is_finite()) {
+                for &(id, i, g) in &sample_grads {
+                    *grads.entry((id, i)).or_default() += g;
+                }
+            } else {
+                non_finite += 1;
+            }
         });
-        grads
+        (grads, non_finite)
     })?;
     let mut sums: Vec<Vec<f64>> = scene
         .params
@@ -271,12 +291,15 @@ fn backward_pass(
         .collect();
     // each tile holds one sum per element: adding tiles in tile order
     // fixes the summation order
-    for t in tiles {
+    let mut non_finite = 0;
+    for (t, n) in tiles {
+        non_finite += n;
         for ((id, i), g) in t {
             sums[id as usize][i as usize] += g;
         }
     }
-    Ok(sums)
+    report_non_finite("reverse mode", non_finite, &layout);
+    Ok((sums, non_finite))
 }
 
 #[cfg(test)]

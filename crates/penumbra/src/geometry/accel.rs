@@ -522,6 +522,9 @@ impl Accel {
                     }
                     let [s, p] = self.prims[id as usize];
                     match &shapes[s as usize] {
+                        // a zero-area face keeps zero edges, like an
+                        // unused lane: never hit (see geometry::mesh)
+                        Shape::Mesh(m) if m.face_is_degenerate(p as usize) => {}
                         Shape::Mesh(m) => {
                             let [p0, p1, p2] = m.triangle(store, p as usize);
                             let (e1, e2) = (p0 - p1, p2 - p0);

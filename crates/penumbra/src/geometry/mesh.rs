@@ -9,6 +9,23 @@
 //! - `<key>.vertex_texcoords`: `[n, 2]`, if the file has uvs.
 //!
 //! Faces (topology) are not parameters: they stay in the mesh.
+//!
+//! Degenerate input that Mitsuba renders is accepted, with one warning per
+//! mesh that counts what was skipped ([`SkippedFaces`]):
+//! - faces that repeat a vertex index, and faces that repeat another face
+//!   (the same three vertices, in any order or orientation), are removed at
+//!   load: they are degenerate whatever the positions become (a repeated
+//!   face would double the area that emitter sampling sees there);
+//! - faces of three distinct vertices with zero area (coincident or
+//!   collinear positions) are kept, because a later update of the vertex
+//!   positions may give them an area; while their area is zero, they are
+//!   never hit, never sampled and add nothing to the vertex normals (see
+//!   [`is_degenerate`]), so they render as nothing, as in Mitsuba.
+//!
+//! Vertices are never renumbered: `vertex_positions` keeps the file's
+//! vertex order and count. Edges shared by more than two faces
+//! (non-manifold) are rendered as they are, with a warning: nothing in the
+//! renderer relies on manifoldness (there is no edge table yet).
 
 use crate::ad::Real;
 use crate::error::{Error, Result};
@@ -35,6 +52,18 @@ pub struct MeshOptions {
     pub flip_normals: bool,
 }
 
+/// Faces of a mesh file that [`Mesh::new`] skipped (see the module
+/// documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SkippedFaces {
+    /// Faces of zero area at load: those with a repeated vertex index
+    /// (removed) and those whose positions are coincident or collinear
+    /// (kept, ignored while their area is zero).
+    pub zero_area: usize,
+    /// Faces with the same three vertices as an earlier face (removed).
+    pub duplicate: usize,
+}
+
 /// A triangle mesh (see the module documentation for its parameters).
 #[derive(Clone, Debug)]
 pub struct Mesh {
@@ -50,12 +79,16 @@ pub struct Mesh {
     pub texcoords: Option<ParamId>,
     pub face_normals: bool,
     pub flip_normals: bool,
+    /// What was skipped at load (reported once, as a warning).
+    pub skipped: SkippedFaces,
+    /// Number of edges shared by more than two faces (rendered as they are).
+    pub non_manifold_edges: usize,
     /// Triangle selection by area for [`ShapeT::sample_position`].
     area_distr: DiscreteDistribution,
     area: f32,
-    /// Unit geometric normal per face (flipped with `flip_normals`),
-    /// derived from the positions with the area table (f32, not
-    /// differentiated: used by position sampling).
+    /// Unit geometric normal per face (flipped with `flip_normals`; zero
+    /// for a degenerate face), derived from the positions with the area
+    /// table (f32, not differentiated: used by position sampling).
     face_n: Vec<Vec3>,
 }
 
@@ -66,8 +99,9 @@ impl Mesh {
     /// `store` under `key`.
     ///
     /// Errors (naming `source` and the face or vertex): empty mesh,
-    /// non-finite values, face index out of range, degenerate (zero-area)
-    /// triangle, non-manifold edge (shared by more than two faces).
+    /// non-finite values, face index out of range, no face of non-zero
+    /// area. Zero-area and duplicate faces and non-manifold edges are
+    /// accepted with one warning (see the module documentation).
     pub fn new(
         plugin: &'static str,
         key: &str,
@@ -137,22 +171,31 @@ impl Mesh {
                 *n = to_world.normal(*n).normalize_or_zero();
             }
         }
-        // degenerate triangles
-        for (f, &[a, b, c]) in data.faces.iter().enumerate() {
-            let (p0, p1, p2) = (
-                data.positions[a as usize].as_dvec3(),
-                data.positions[b as usize].as_dvec3(),
-                data.positions[c as usize].as_dvec3(),
-            );
-            let (e1, e2) = (p1 - p0, p2 - p0);
-            let cr = e1.cross(e2).length();
-            if cr.is_nan() || cr <= 1e-12 * e1.length() * e2.length() || cr == 0.0 {
-                return Err(err(format!(
-                    "face {f} (vertices {a}, {b}, {c}) is degenerate (zero area); remove it from the mesh"
-                )));
-            }
+        let n_read = data.faces.len();
+        let skipped = remove_degenerate_faces(&mut data.faces, &data.positions);
+        let non_manifold_edges = count_non_manifold_edges(&data.faces);
+        let mut notes = Vec::new();
+        if skipped.zero_area > 0 {
+            notes.push(format!("{} zero-area", skipped.zero_area));
         }
-        check_manifold(&data.faces).map_err(err)?;
+        if skipped.duplicate > 0 {
+            notes.push(format!("{} duplicate", skipped.duplicate));
+        }
+        let mut msg = Vec::new();
+        if !notes.is_empty() {
+            msg.push(format!(
+                "skipped {} of {n_read} faces (they render as nothing, as in Mitsuba)",
+                notes.join(" and ")
+            ));
+        }
+        if non_manifold_edges > 0 {
+            msg.push(format!(
+                "{non_manifold_edges} edges are shared by more than two faces (non-manifold); rendered as they are"
+            ));
+        }
+        if !msg.is_empty() {
+            crate::warn(format!("{source}: {}", msg.join("; ")));
+        }
 
         let opts_normals = if opts.face_normals {
             None
@@ -201,6 +244,8 @@ impl Mesh {
             texcoords,
             face_normals: opts.face_normals,
             flip_normals: opts.flip_normals,
+            skipped,
+            non_manifold_edges,
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
             face_n: Vec::new(),
@@ -238,18 +283,32 @@ impl Mesh {
         ]
     }
 
+    /// Whether triangle `f` currently has zero area (see [`is_degenerate`]):
+    /// it is then never hit nor sampled.
+    pub fn face_is_degenerate(&self, f: usize) -> bool {
+        self.face_n[f] == Vec3::ZERO
+    }
+
     fn update_areas(&mut self, store: &ParamStore) -> Result<()> {
-        let areas: Vec<f32> = (0..self.faces.len())
+        let (areas, normals): (Vec<f32>, Vec<Vec3>) = (0..self.faces.len())
             .map(|f| {
                 let [p0, p1, p2] = self.triangle(store, f);
-                0.5 * (p1 - p0).cross(p2 - p0).length()
+                if is_degenerate(p0, p1, p2) {
+                    (0.0, Vec3::ZERO)
+                } else {
+                    let c = (p1 - p0).as_dvec3().cross((p2 - p0).as_dvec3());
+                    let n = c.normalize().as_vec3();
+                    let n = if self.flip_normals { -n } else { n };
+                    (0.5 * c.length() as f32, n)
+                }
             })
-            .collect();
-        self.face_n = (0..self.faces.len())
-            .map(|f| self.face_normal(store, f))
-            .collect();
+            .unzip();
+        self.face_n = normals;
         self.area_distr = DiscreteDistribution::new(&areas).ok_or_else(|| {
-            Error::Invalid(format!("{}: the mesh has zero total area", self.source))
+            Error::Invalid(format!(
+                "{}: every face of the mesh has zero area; a shape needs at least one triangle",
+                self.source
+            ))
         })?;
         self.area = self.area_distr.sum() as f32;
         Ok(())
@@ -282,10 +341,11 @@ impl Mesh {
         self.update_areas(store)
     }
 
-    /// Geometric normal of triangle `f` (unit, flipped if `flip_normals`).
+    /// Geometric normal of triangle `f` (unit, flipped if `flip_normals`;
+    /// zero for a degenerate face).
     pub fn face_normal(&self, store: &ParamStore, f: usize) -> Vec3 {
         let [p0, p1, p2] = self.triangle(store, f);
-        let n = (p1 - p0).cross(p2 - p0).normalize();
+        let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
         if self.flip_normals {
             -n
         } else {
@@ -422,41 +482,69 @@ impl ShapeT for Mesh {
     }
 }
 
-/// Fails if an edge is shared by more than two faces.
-fn check_manifold(faces: &[[u32; 3]]) -> std::result::Result<(), String> {
-    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(faces.len() * 3);
-    for (f, t) in faces.iter().enumerate() {
+/// Whether the triangle (p0, p1, p2) has zero area: coincident or
+/// collinear vertices, up to the rounding of f32 positions (the cross
+/// product is computed in f64, relative to the edge lengths), or
+/// non-finite. The one test of degeneracy shared by loading, area
+/// sampling, vertex normals and the acceleration structure, so that they
+/// agree on which faces exist.
+pub fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
+    let (e1, e2) = ((p1 - p0).as_dvec3(), (p2 - p0).as_dvec3());
+    let cross = e1.cross(e2).length();
+    // `!(a > b)` is also true for NaN
+    !(cross > 1e-12 * e1.length() * e2.length())
+}
+
+/// Removes the faces that are degenerate whatever the positions (a repeated
+/// vertex index) and the faces that repeat an earlier one (the same vertex
+/// set), and counts, with them, the faces of zero area at `positions`
+/// (which stay).
+fn remove_degenerate_faces(faces: &mut Vec<[u32; 3]>, positions: &[Vec3]) -> SkippedFaces {
+    let mut skipped = SkippedFaces::default();
+    let mut seen = std::collections::HashSet::with_capacity(faces.len());
+    faces.retain(|&[a, b, c]| {
+        if a == b || b == c || a == c {
+            skipped.zero_area += 1;
+            return false;
+        }
+        let mut sorted = [a, b, c];
+        sorted.sort_unstable();
+        if !seen.insert(sorted) {
+            skipped.duplicate += 1;
+            return false;
+        }
+        let p = |i: u32| positions[i as usize];
+        if is_degenerate(p(a), p(b), p(c)) {
+            skipped.zero_area += 1;
+        }
+        true
+    });
+    skipped
+}
+
+/// Number of edges shared by more than two faces.
+fn count_non_manifold_edges(faces: &[[u32; 3]]) -> usize {
+    let mut edges: Vec<u64> = Vec::with_capacity(faces.len() * 3);
+    for t in faces {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             let (a, b) = if a < b { (a, b) } else { (b, a) };
-            edges.push((((a as u64) << 32) | b as u64, f as u32));
+            edges.push(((a as u64) << 32) | b as u64);
         }
     }
     edges.sort_unstable();
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j].0 == edges[i].0 {
-            j += 1;
-        }
-        if j - i > 2 {
-            let (a, b) = (edges[i].0 >> 32, edges[i].0 & 0xffff_ffff);
-            let fs: Vec<String> = edges[i..j].iter().map(|e| e.1.to_string()).collect();
-            return Err(format!(
-                "non-manifold edge between vertices {a} and {b}: shared by {} faces ({}); an edge may belong to at most two faces",
-                j - i,
-                fs.join(", ")
-            ));
-        }
-        i = j;
-    }
-    Ok(())
+    edges
+        .chunk_by(|a, b| a == b)
+        .filter(|run| run.len() > 2)
+        .count()
 }
 
 /// Smooth vertex normals: the face normals of the triangles around each
 /// vertex, weighted by the triangle's angle at that vertex (Thürmer and
 /// Wüthrich 1998, "Computing Vertex Normals from Polygonal Facets"), as
-/// Mitsuba 3 computes them. Unused vertices get a zero normal.
+/// Mitsuba 3 computes them. Degenerate faces are left out (their normal
+/// is undefined, and a collinear face would weigh its rounding noise by an
+/// angle of π). Unused vertices get a zero normal.
 pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
     let mut acc = vec![Vec3::ZERO; positions.len()];
     for f in faces {
@@ -465,6 +553,9 @@ pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
             positions[f[1] as usize],
             positions[f[2] as usize],
         ];
+        if is_degenerate(p[0], p[1], p[2]) {
+            continue;
+        }
         let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
         for k in 0..3 {
             let d0 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
@@ -525,28 +616,129 @@ mod tests {
         assert!(e.contains("face 1") && e.contains("vertex 7"), "{e}");
 
         let mut d = tet();
-        d.faces[3] = [1, 2, 2];
-        let e = build(d).unwrap_err().to_string();
-        assert!(e.contains("face 3") && e.contains("degenerate"), "{e}");
-
-        let mut d = tet();
-        d.positions.push(Vec3::new(2.0, 0.0, 0.0));
-        d.faces[3] = [0, 1, 4]; // collinear
-        let e = build(d).unwrap_err().to_string();
-        assert!(e.contains("face 3") && e.contains("degenerate"), "{e}");
-
-        let mut d = tet();
-        d.positions.push(Vec3::new(0.5, -1.0, 0.3));
-        d.faces.push([0, 1, 4]); // edge 0-1 now in three faces
+        d.positions[1].z = f32::INFINITY;
         let e = build(d).unwrap_err().to_string();
         assert!(
-            e.contains("non-manifold edge between vertices 0 and 1"),
+            e.contains("test.ply") && e.contains("vertex 1") && e.contains("non-finite"),
             "{e}"
         );
+
+        // only zero-area faces: nothing to render or sample
+        let mut d = tet();
+        d.faces = vec![[0, 1, 1], [2, 2, 2]];
+        let e = build(d).unwrap_err().to_string();
+        assert!(e.contains("test.ply") && e.contains("zero area"), "{e}");
 
         let e = build(MeshData::default()).unwrap_err().to_string();
         assert!(e.contains("empty mesh"), "{e}");
         assert!(build(tet()).is_ok());
+    }
+
+    /// Zero-area and duplicate faces (which Mitsuba renders as nothing) are
+    /// counted and skipped; vertices keep their numbering, and the area and
+    /// normals are those of the mesh without them.
+    #[test]
+    fn zero_area_and_duplicate_faces_are_skipped_and_counted() {
+        let mut d = tet();
+        // vertices 4, 5 on the line through 0 and 1
+        d.positions.push(Vec3::new(2.0, 0.0, 0.0));
+        d.positions.push(Vec3::new(3.0, 0.0, 0.0));
+        d.faces.push([1, 2, 2]); // repeated index
+        d.faces.push([0, 4, 5]); // collinear positions
+        d.faces.push([1, 0, 2]); // face 0 = [0, 2, 1], other orientation
+        d.faces.push([3, 0, 1]); // face 1 = [0, 1, 3], rotated
+        let (m, store) = build(d).unwrap();
+        assert_eq!(
+            m.skipped,
+            SkippedFaces {
+                zero_area: 2,
+                duplicate: 2
+            }
+        );
+        // the collinear face stays (it may gain area), ignored while flat
+        assert_eq!(m.face_count(), 5);
+        assert!(m.face_is_degenerate(4) && !m.face_is_degenerate(0));
+        assert_eq!(m.vertex_count(&store), 6);
+        assert_eq!(store.get(m.positions).shape, vec![6, 3]);
+        let (clean, clean_store) = build(tet()).unwrap();
+        assert!((m.surface_area() - clean.surface_area()).abs() < 1e-6);
+        let (n, cn) = (
+            store.data(m.normals.unwrap()),
+            clean_store.data(clean.normals.unwrap()),
+        );
+        for (a, b) in n[..12].iter().zip(cn) {
+            assert!((a - b).abs() < 1e-6, "{n:?} vs {cn:?}");
+        }
+        assert_eq!(m.non_manifold_edges, 0);
+        assert_eq!(clean.skipped, SkippedFaces::default());
+    }
+
+    /// An edge shared by three faces renders (as in Mitsuba) and is
+    /// counted.
+    #[test]
+    fn non_manifold_edges_are_accepted_and_counted() {
+        let mut d = tet();
+        d.positions.push(Vec3::new(0.5, -1.0, 0.3));
+        d.faces.push([0, 1, 4]); // edge 0-1 now in three faces
+        let (m, _) = build(d).unwrap();
+        assert_eq!(m.non_manifold_edges, 1);
+        assert_eq!(m.face_count(), 5);
+    }
+
+    /// A face that is flat at load is never hit nor sampled; once an update
+    /// of the positions gives it an area it is, and when it flattens again
+    /// it is not.
+    #[test]
+    fn zero_area_face_follows_position_updates() {
+        use crate::geometry::{Accel, Shape};
+        let d = MeshData {
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(-1.0, 0.0, 1.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(0.0, 0.0, 1.0), // on the line 3-4: face 1 is flat
+            ],
+            faces: vec![[0, 1, 2], [3, 4, 5]],
+            ..Default::default()
+        };
+        let (m, mut store) = build(d).unwrap();
+        assert_eq!(m.skipped.zero_area, 1);
+        let mut shapes = vec![Shape::Mesh(m)];
+        let mut accel = Accel::build(&shapes, &store);
+        let ray = Ray::new(Vec3::new(0.0, 0.2, 5.0), -Vec3::Z);
+        let hit_prim = |a: &Accel| a.intersect(&ray).map(|h| (h.prim, h.t));
+        let sampled = |s: &[Shape], store: &ParamStore| {
+            let Shape::Mesh(m) = &s[0] else {
+                unreachable!()
+            };
+            (0..64)
+                .map(|k| {
+                    let u = Vec2::new((k as f32 + 0.5) / 64.0, 0.5);
+                    m.sample_position(store, u).prim
+                })
+                .collect::<std::collections::HashSet<u32>>()
+        };
+        assert_eq!(hit_prim(&accel).map(|h| h.0), Some(0));
+        assert_eq!(sampled(&shapes, &store), [0].into());
+
+        let mut move_vertex_5 = |y: f32, shapes: &mut Vec<Shape>, accel: &mut Accel| {
+            let mut p = store.data(store.id("m.vertex_positions").unwrap()).to_vec();
+            p[16] = y;
+            store.set("m.vertex_positions", &p).unwrap();
+            let changed = store.take_dirty();
+            shapes[0].parameters_changed(&mut store, &changed).unwrap();
+            accel.update(shapes, &store);
+            (hit_prim(accel), sampled(shapes, &store))
+        };
+        let (hit, prims) = move_vertex_5(1.0, &mut shapes, &mut accel);
+        let (prim, t) = hit.unwrap();
+        assert!(prim == 1 && (t - 4.0).abs() < 1e-5, "{hit:?}");
+        assert_eq!(prims, [0, 1].into());
+        let (hit, prims) = move_vertex_5(0.0, &mut shapes, &mut accel);
+        assert_eq!(hit.map(|h| h.0), Some(0));
+        assert_eq!(prims, [0].into());
     }
 
     #[test]

@@ -14,5 +14,5 @@ pub mod shapes;
 
 pub use accel::Accel;
 pub use interaction::{Hit, PositionSample, Ray, SurfaceInteraction};
-pub use mesh::{Mesh, MeshData, MeshOptions};
+pub use mesh::{Mesh, MeshData, MeshOptions, SkippedFaces};
 pub use shape::{Shape, ShapeT, SHAPE_PLUGINS};

@@ -49,6 +49,9 @@ pub struct Rendered {
     pub height: usize,
     pub channel_names: Vec<String>,
     pub data: Vec<f32>,
+    /// Samples left out of the image because a value was NaN or infinite
+    /// (reported once per render with [`crate::warn()`]).
+    pub non_finite_samples: usize,
 }
 
 impl Rendered {
@@ -73,30 +76,48 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
         }
         names.insert(3.min(n), "A".into());
     }
-    let block = render_samples(scene, opts, names.len(), |ray, rng, out| {
-        if alpha {
-            // colour, alpha, then any further (AOV) channels
-            let mut buf = [0.0f32; 64];
-            let rest = &mut buf[..n];
-            integrator.sample(scene, ray, rng, rest);
-            let k = 3.min(n);
-            out[..k].copy_from_slice(&rest[..k]);
-            out[k] = if scene.intersect(&ray).is_some() {
-                1.0
+    let (block, non_finite_samples) =
+        render_samples(scene, opts, names.len(), "render", |ray, rng, out| {
+            if alpha {
+                // colour, alpha, then any further (AOV) channels
+                let mut buf = [0.0f32; 64];
+                let rest = &mut buf[..n];
+                integrator.sample(scene, ray, rng, rest);
+                let k = 3.min(n);
+                out[..k].copy_from_slice(&rest[..k]);
+                out[k] = if scene.intersect(&ray).is_some() {
+                    1.0
+                } else {
+                    0.0
+                };
+                out[k + 1..].copy_from_slice(&rest[k..]);
             } else {
-                0.0
-            };
-            out[k + 1..].copy_from_slice(&rest[k..]);
-        } else {
-            integrator.sample(scene, ray, rng, out)
-        }
-    })?;
+                integrator.sample(scene, ray, rng, out)
+            }
+        })?;
     Ok(Rendered {
         width: block.width,
         height: block.height,
         channel_names: names,
         data: block.develop(),
+        non_finite_samples,
     })
+}
+
+/// Warns once that `count` samples of a pass (`what`: "render", …) were
+/// NaN or infinite and left out. A sample is dropped whole rather than
+/// clamped: one NaN would otherwise poison its pixel (or, in reverse mode,
+/// every gradient it touches), and the others are unbiased without it up
+/// to the weight of the dropped ones, which the count lets a user judge.
+pub(crate) fn report_non_finite(what: &str, count: usize, layout: &SampleLayout) {
+    if count > 0 {
+        let (w, h) = layout.size();
+        crate::warn(format!(
+            "{what}: {count} sample(s) had a NaN or infinite value and were left out \
+             ({} samples per pixel, {w}x{h} pixels); look for extreme emitter or texture values",
+            layout.spp
+        ));
+    }
 }
 
 /// The rectangle of film pixels (crop-window coordinates, possibly
@@ -299,14 +320,17 @@ fn available_memory() -> Option<u64> {
 
 /// Runs `sample(ray, stream, out)` for every sample of every pixel of the
 /// sensor's crop window (and its border, with `sample_border`), splats the
-/// `channels` values it writes, and returns the merged crop-window block.
-/// Shared by primal and forward-mode rendering.
+/// `channels` values it writes, and returns the merged crop-window block
+/// and the number of samples left out for a non-finite value (reported
+/// once with [`report_non_finite`]). Shared by primal and forward-mode
+/// rendering.
 pub(crate) fn render_samples<F>(
     scene: &Scene,
     opts: &RenderOptions,
     channels: usize,
+    what: &str,
     sample: F,
-) -> Result<ImageBlock>
+) -> Result<(ImageBlock, usize)>
 where
     F: Fn(Ray, &mut SampleStream, &mut [f32]) + Sync,
 {
@@ -323,21 +347,27 @@ where
             channels,
         );
         let mut out = vec![0.0f32; channels];
+        let mut non_finite = 0usize;
         layout.for_each_sample(tile, |pos, ray, rng| {
             out.fill(0.0);
             sample(ray, rng, &mut out);
             if out.iter().all(|v| v.is_finite()) {
                 block.put(filter, pos.x, pos.y, &out);
+            } else {
+                non_finite += 1;
             }
         });
-        block
+        (block, non_finite)
     })?;
     let (cw, ch) = layout.size();
     let mut image = ImageBlock::new(0, 0, cw, ch, channels);
-    for b in &blocks {
+    let mut non_finite = 0;
+    for (b, n) in &blocks {
         image.accumulate(b);
+        non_finite += n;
     }
-    Ok(image)
+    report_non_finite(what, non_finite, &layout);
+    Ok((image, non_finite))
 }
 
 #[cfg(test)]

@@ -1,14 +1,20 @@
 //! Optimisation jobs described in TOML (`penumbra optimize JOB.toml`):
 //! the scene, the targets (images, or renders of the scene as loaded), the
 //! parameters with their initial values and learning rates, the loss, the
-//! optimiser, the iterations and samples per pixel. A job writes progress
-//! images, the final parameters (EXR for textures), the loss per iteration
-//! (CSV) and a loss plot (PNG).
+//! optimiser, the iterations and samples per pixel. A job writes, in its
+//! output folder: the target image(s) (`target.exr`, `target.png`; with
+//! several views `target_<v>.*`), the final render beside them
+//! (`final.exr`, `final.png`, with the target's samples per pixel),
+//! progress images (`iter_<i>.png`), the final parameters (`params.txt`,
+//! EXR for textures), the loss per iteration (`loss.csv`) and a plot of it
+//! (`loss.png`: raw values faint, their trend bold, log scale; a
+//! second panel with the parameter error when the truth is known).
 //!
 //! ```toml
 //! scene = "../scenes/cbox.xml"       # relative to the job file
 //! defines = { res = "128" }
-//! output = "out/cbox-walls"          # relative to the job file
+//! output = "out/cbox-walls"          # optional, relative to the job file;
+//!                                    # default out/optimize/<job name>/
 //! iterations = 60
 //! spp = 16
 //! loss = "l2"                        # l1 | l2 | rel_l2
@@ -29,7 +35,8 @@
 use super::{Loss, Method, Optimizer};
 use crate::diff::render_backward;
 use crate::error::{Error, Result};
-use crate::image::{plot::plot_curve, read_image, write_exr, write_png, Image};
+use crate::image::plot::{plot_curve, stack};
+use crate::image::{read_image, write_exr, write_png, Image};
 use crate::integrator::{render, RenderOptions};
 use crate::math::Transform;
 use crate::scene::Scene;
@@ -44,7 +51,7 @@ pub struct JobFile {
     pub scene: PathBuf,
     #[serde(default)]
     pub defines: BTreeMap<String, String>,
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
     pub iterations: u32,
     #[serde(default = "default_spp")]
     pub spp: u32,
@@ -154,8 +161,17 @@ pub struct JobResult {
 pub struct Job {
     pub spec: JobFile,
     pub scene: Scene,
+    /// Where the results go: the job's `output` (relative to the job
+    /// file), or `out/optimize/<job file name>/` (relative to the working
+    /// directory, like the other commands' outputs). May be replaced
+    /// before [`Job::run`] (the CLI's `-o`).
+    pub output: PathBuf,
     dir: PathBuf,
 }
+
+/// Samples per pixel of the final render when the targets are images (a
+/// rendered target sets its own).
+const FINAL_SPP: u32 = 256;
 
 impl Job {
     /// Reads a job file and loads its scene.
@@ -189,13 +205,25 @@ impl Job {
         if spec.iterations == 0 || spec.spp == 0 {
             return Err(Error::file(path, "iterations and spp must be at least 1"));
         }
-        Ok(Job { spec, scene, dir })
+        let output = match &spec.output {
+            Some(o) => dir.join(o),
+            None => {
+                let name = path.file_stem().unwrap_or_default();
+                Path::new("out").join("optimize").join(name)
+            }
+        };
+        Ok(Job {
+            spec,
+            scene,
+            output,
+            dir,
+        })
     }
 
     /// Runs the job; `progress(iteration, loss)` is called after each step.
     pub fn run(&mut self, mut progress: impl FnMut(u32, f64)) -> Result<JobResult> {
         let spec = &self.spec;
-        let out = self.dir.join(&spec.output);
+        let out = self.output.clone();
         std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e))?;
         let loss = Loss::parse(&spec.loss)?;
         let method = match spec.optimizer.method.as_str() {
@@ -215,6 +243,16 @@ impl Job {
         };
         let scene = &mut self.scene;
         let n_views = scene.sensors.len();
+        // `<name>.exr` and `<name>.png` for one view, `<name>_<v>.*` for several
+        let write_view = |name: &str, v: usize, img: &Image| -> Result<()> {
+            let stem = if n_views == 1 {
+                name.to_string()
+            } else {
+                format!("{name}_{v}")
+            };
+            write_exr(&out.join(format!("{stem}.exr")), img, &["R", "G", "B"])?;
+            write_png(&out.join(format!("{stem}.png")), img)
+        };
 
         // targets
         let truth: Vec<Vec<f32>> = spec
@@ -239,8 +277,7 @@ impl Job {
                             ..Default::default()
                         },
                     )?;
-                    let t = to_image(&img.data, img.width, img.height);
-                    write_exr(&out.join(format!("target_{v}.exr")), &t, &["R", "G", "B"])?;
+                    write_view("target", v, &to_image(&img.data, img.width, img.height))?;
                     Ok(img.data)
                 })
                 .collect::<Result<_>>()?
@@ -254,7 +291,23 @@ impl Job {
             spec.target
                 .images
                 .iter()
-                .map(|p| read_image(&self.dir.join(p)).map(|i| i.data))
+                .enumerate()
+                .map(|(v, p)| {
+                    let path = self.dir.join(p);
+                    let img = read_image(&path)?;
+                    if img.channels < 3 {
+                        return Err(Error::file(
+                            &path,
+                            format!(
+                                "a target image needs R, G, B; it has {} channel(s)",
+                                img.channels
+                            ),
+                        ));
+                    }
+                    let img = img.take_channels(3);
+                    write_view("target", v, &img)?;
+                    Ok(img.data)
+                })
                 .collect::<Result<_>>()?
         };
 
@@ -346,7 +399,19 @@ impl Job {
             progress(it, total);
         }
 
-        // results
+        // results: the final render beside each target
+        for v in 0..n_views {
+            let img = render(
+                scene,
+                &RenderOptions {
+                    spp: Some(spec.target.render_spp.unwrap_or(FINAL_SPP)),
+                    seed: (1 << 40) + 1,
+                    sensor: v,
+                    ..Default::default()
+                },
+            )?;
+            write_view("final", v, &to_image(&img.data, img.width, img.height))?;
+        }
         let csv: String = losses
             .iter()
             .enumerate()
@@ -360,16 +425,23 @@ impl Job {
             format!("iteration,loss,mean_abs_param_error\n{csv}"),
         )
         .map_err(|e| Error::file(out.join("loss.csv"), e))?;
-        write_png(
-            &out.join("loss.png"),
-            &plot_curve(&losses, 640, 400, "loss"),
-        )?;
+        let mut panels = vec![plot_curve(
+            &losses,
+            640,
+            400,
+            &format!("loss ({}, {} spp per step)", spec.loss, spec.spp),
+            true,
+        )];
         if !error_curve.is_empty() {
-            write_png(
-                &out.join("param_error.png"),
-                &plot_curve(&error_curve, 640, 400, "mean abs param error"),
-            )?;
+            panels.push(plot_curve(
+                &error_curve,
+                640,
+                400,
+                "mean |param - truth|",
+                false,
+            ));
         }
+        write_png(&out.join("loss.png"), &stack(&panels))?;
         let mut summary = String::new();
         let mut param_errors = Vec::new();
         for (p, t) in spec.params.iter().zip(&truth) {

@@ -163,6 +163,7 @@ mod tests {
                         shape: vec![2],
                         data: x.iter().zip(&target).map(|(x, t)| 2.0 * (x - t)).collect(),
                     }],
+                    ..Default::default()
                 };
                 opt.step(&mut s, &g).unwrap();
             }

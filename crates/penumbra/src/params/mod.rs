@@ -64,7 +64,8 @@ pub enum Domain {
 }
 
 impl Domain {
-    fn admits(self, v: f32) -> bool {
+    /// Whether `v` lies in the domain.
+    pub fn admits(self, v: f32) -> bool {
         v.is_finite()
             && match self {
                 Domain::Finite => true,
@@ -73,7 +74,8 @@ impl Domain {
                 Domain::UnitInterval => (0.0..=1.0).contains(&v),
             }
     }
-    fn describe(self) -> &'static str {
+    /// The domain in words ("in [0, 1]"), for messages.
+    pub fn describe(self) -> &'static str {
         match self {
             Domain::Finite => "finite",
             Domain::NonNegative => "finite and >= 0",

@@ -98,8 +98,9 @@ impl Bitmap {
     /// Builds a bitmap from its node: `filename`, `filter_type`
     /// (bilinear | nearest), `wrap_mode` (repeat | mirror | clamp), `raw`
     /// (default false: PNG/JPEG data is sRGB-decoded to linear at load;
-    /// EXR data is linear and used as is), `to_uv`.
-    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Bitmap> {
+    /// EXR data is linear and used as is), `to_uv`. `domain`: that of the
+    /// slot the bitmap fills (see [`Bitmap::new`]).
+    pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Bitmap> {
         let filename = node
             .string_opt("filename")?
             .ok_or_else(|| node.error("missing required parameter 'filename'"))?;
@@ -133,17 +134,22 @@ impl Bitmap {
             }
         }
         let to_uv = node.transform("to_uv")?;
-        Bitmap::new(&node.key, img, filter, wrap, &to_uv, ctx).map_err(|e| node.error(e))
+        Bitmap::new(&node.key, img, filter, wrap, &to_uv, domain, ctx).map_err(|e| node.error(e))
     }
 
     /// A bitmap over linear image data `img` (1 or 3 channels) registered
-    /// under parameter key `<key>.data`.
+    /// under parameter key `<key>.data` with `domain`, the valid range of
+    /// the slot it fills (a reflectance: [0, 1]), so that optimisers keep
+    /// the texels in it. Data outside the domain (an HDR image used as a
+    /// reflectance) renders as it is, as in Mitsuba, with a warning; the
+    /// texels are then only required to be finite.
     pub fn new(
         key: &str,
         img: Image,
         filter: FilterType,
         wrap: WrapMode,
         to_uv: &Transform,
+        domain: Domain,
         ctx: &mut LoadContext,
     ) -> Result<Bitmap> {
         if !(img.channels == 1 || img.channels == 3) || img.width == 0 || img.height == 0 {
@@ -154,12 +160,25 @@ impl Bitmap {
         }
         let to_uv = add_to_uv(key, to_uv, ctx)?;
         let (width, height, channels) = (img.width, img.height, img.channels);
+        let outside = img.data.iter().filter(|&&v| !domain.admits(v)).count();
+        let domain = if outside > 0 && img.data.iter().all(|v| v.is_finite()) {
+            crate::warn(format!(
+                "bitmap '{key}': {outside} of {} texel values are outside the range of the \
+                 parameter it sets (values {}); rendered as they are, and an optimiser \
+                 will not keep '{key}.data' in that range",
+                img.data.len(),
+                domain.describe()
+            ));
+            Domain::Finite
+        } else {
+            domain
+        };
         let data = ctx.store.add(
             format!("{key}.data"),
             img.data,
             vec![height, width, channels],
             ParamFlags::DIFFERENTIABLE,
-            Domain::Finite,
+            domain,
         )?;
         Ok(Bitmap {
             data,
@@ -260,7 +279,16 @@ mod tests {
 
     fn make(filter: FilterType, wrap: WrapMode, to_uv: Transform) -> (Bitmap, LoadContext) {
         let mut ctx = LoadContext::default();
-        let b = Bitmap::new("tex", grid(), filter, wrap, &to_uv, &mut ctx).unwrap();
+        let b = Bitmap::new(
+            "tex",
+            grid(),
+            filter,
+            wrap,
+            &to_uv,
+            Domain::Finite,
+            &mut ctx,
+        )
+        .unwrap();
         (b, ctx)
     }
 
@@ -413,7 +441,7 @@ mod tests {
                 ],
             );
             let mut ctx = LoadContext::default();
-            let t = Texture::from_node(&node, &mut ctx).unwrap();
+            let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
             let got = t.eval::<f32>(&ctx.store, &si_at_uv(0.25, 0.25)).val();
             assert!(close(got, want), "raw {raw}: {got} vs {want}");
             let p = ctx.store.get(ctx.store.require("tex.data").unwrap());
@@ -428,7 +456,7 @@ mod tests {
             vec![("filename", file.clone())],
         );
         let mut ctx = LoadContext::default();
-        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         let got = t.eval::<f32>(&ctx.store, &si_at_uv(0.5, 0.25)).val();
         assert!(
             close(got, Vec3::new(0.107_93, 0.027_152, 0.788_79)),
@@ -444,7 +472,7 @@ mod tests {
                 ("wrap_mode", Value::Str("wrap".into())),
             ],
         );
-        let e = Texture::from_node(&node, &mut LoadContext::default())
+        let e = Texture::from_node(&node, Domain::Finite, &mut LoadContext::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -460,7 +488,7 @@ mod tests {
                 ("filtertype", Value::Str("nearest".into())),
             ],
         );
-        let e = Texture::from_node(&node, &mut LoadContext::default())
+        let e = Texture::from_node(&node, Domain::Finite, &mut LoadContext::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("unknown parameter 'filtertype'"), "{e}");
@@ -477,7 +505,7 @@ mod tests {
             vec![("filename", Value::Str(p.to_str().unwrap().into()))],
         );
         let mut ctx = LoadContext::default();
-        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         let Texture::Bitmap(b) = &t else {
             panic!("not a bitmap")
         };
@@ -497,6 +525,43 @@ mod tests {
         assert!(ctx.store.id("plane.bsdf.reflectance.data").is_some());
     }
 
+    /// A bitmap nested in a reflectance slot takes the slot's domain, [0,
+    /// 1], so that optimisers project its texels into it; HDR data outside
+    /// it still loads (as in Mitsuba), with the finite domain.
+    #[test]
+    fn bitmap_takes_the_domain_of_its_slot() {
+        let dir = std::env::temp_dir().join(format!("penumbra-domain-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, texel, want) in [
+            ("ldr.exr", 0.8f32, Domain::UnitInterval),
+            ("hdr.exr", 1.5, Domain::Finite),
+        ] {
+            let mut img = Image::new(2, 2, 3);
+            img.data.fill(texel);
+            let file = dir.join(name);
+            crate::image::write_exr(&file, &img, &["R", "G", "B"]).unwrap();
+            let tex = test_node(
+                Class::Texture,
+                "bitmap",
+                "b.reflectance",
+                vec![("filename", Value::Str(file.display().to_string()))],
+            );
+            let bsdf = test_node(
+                Class::Bsdf,
+                "diffuse",
+                "b",
+                vec![("reflectance", Value::Node(std::rc::Rc::new(tex)))],
+            );
+            let mut ctx = LoadContext::default();
+            crate::bsdf::Bsdf::from_node(&bsdf, &mut ctx).unwrap();
+            let p = ctx
+                .store
+                .get(ctx.store.require("b.reflectance.data").unwrap());
+            assert_eq!(p.domain, want, "{name}");
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     #[test]
     fn monochrome_bitmaps_splat() {
         let mut img = Image::new(2, 1, 1);
@@ -508,6 +573,7 @@ mod tests {
             FilterType::Bilinear,
             WrapMode::Clamp,
             &Transform::IDENTITY,
+            Domain::Finite,
             &mut ctx,
         )
         .unwrap();

@@ -28,24 +28,11 @@ pub struct Checkerboard {
 
 impl Checkerboard {
     /// `color0` (default 0.4), `color1` (default 0.2): values or
-    /// textures; `to_uv`.
-    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Checkerboard> {
-        let color0 = Texture::from_prop(
-            node,
-            "color0",
-            Some(0.4),
-            Channels::Rgb,
-            Domain::Finite,
-            ctx,
-        )?;
-        let color1 = Texture::from_prop(
-            node,
-            "color1",
-            Some(0.2),
-            Channels::Rgb,
-            Domain::Finite,
-            ctx,
-        )?;
+    /// textures, in the `domain` of the slot the checkerboard fills;
+    /// `to_uv`.
+    pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Checkerboard> {
+        let color0 = Texture::from_prop(node, "color0", Some(0.4), Channels::Rgb, domain, ctx)?;
+        let color1 = Texture::from_prop(node, "color1", Some(0.2), Channels::Rgb, domain, ctx)?;
         let t = node.transform("to_uv")?;
         let to_uv = add_to_uv(&node.key, &t, ctx)?;
         Ok(Checkerboard {
@@ -180,7 +167,7 @@ mod tests {
     fn pattern_defaults_and_eval_1() {
         let node = test_node(Class::Texture, "checkerboard", "c", vec![]);
         let mut ctx = LoadContext::default();
-        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         let s = &ctx.store;
         for ((u, v), want) in [
             ((0.25, 0.25), 0.4),
@@ -224,7 +211,7 @@ mod tests {
             ],
         );
         let mut ctx = LoadContext::default();
-        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         // uv (0.3, 0.1) -> (0.6, 0.2): color1
         let e = t.eval::<f32>(&ctx.store, &si_at_uv(0.3, 0.1)).val();
         assert_eq!(e, glam::Vec3::new(0.0, 0.0, 1.0));

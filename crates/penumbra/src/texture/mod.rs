@@ -111,7 +111,7 @@ impl Texture {
                     return Err(node.prop_error(p, "must be a float or a texture, found an rgb"))
                 }
             },
-            Value::Node(n) => return Texture::from_node(n, ctx),
+            Value::Node(n) => return Texture::from_node(n, domain, ctx),
             _ => return Err(node.prop_error(p, "must be a float, rgb, spectrum or texture")),
         };
         Uniform::new(&key, channels, value, domain, ctx)
@@ -119,17 +119,19 @@ impl Texture {
             .map_err(|e| node.prop_error(p, e))
     }
 
-    /// Builds a `<texture>` node.
     /// Builds a `<texture>` node (and checks that all its parameters were
-    /// used).
-    pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Texture> {
+    /// used). `domain` is the valid range of the slot it fills (a
+    /// reflectance: [0, 1]); its parameters get it, so that optimisers
+    /// project them into it. A texture shared by id keeps the domain of
+    /// its first use.
+    pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Texture> {
         let shared = node.id.is_some().then_some(node as *const Node);
         if let Some(t) = shared.and_then(|p| ctx.shared_textures.get(&p)) {
             return Ok(t.clone());
         }
         let t = match node.plugin.as_str() {
-            "bitmap" => Texture::Bitmap(Bitmap::from_node(node, ctx)?),
-            "checkerboard" => Texture::Checkerboard(Checkerboard::from_node(node, ctx)?),
+            "bitmap" => Texture::Bitmap(Bitmap::from_node(node, domain, ctx)?),
+            "checkerboard" => Texture::Checkerboard(Checkerboard::from_node(node, domain, ctx)?),
             _ => {
                 return Err(node.error(format!(
                     "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard)",
