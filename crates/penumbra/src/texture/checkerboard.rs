@@ -99,7 +99,7 @@ mod tests {
                 ),
             ],
         );
-        Texture::from_node(&node, ctx).unwrap()
+        Texture::from_node(&node, Domain::Finite, ctx).unwrap()
     }
 
     #[test]
@@ -143,7 +143,7 @@ mod tests {
         // (color0, 1/16): color0 covers (¼ + 1/16) / (9/16) = 5/9.
         let node = test_node(Class::Texture, "checkerboard", "c", vec![]);
         let mut ctx = LoadContext::default();
-        let t = Texture::from_node(&node, &mut ctx).unwrap();
+        let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         let n = 300; // cell 1/400: the edge at ½ falls between cells
         let mut sum = 0.0f64;
         for j in 0..n {
