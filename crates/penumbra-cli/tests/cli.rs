@@ -258,8 +258,8 @@ fn commands_write_under_out_by_default_and_keep_stdout_parseable() {
 
 #[test]
 #[cfg(target_os = "linux")]
-fn a_film_larger_than_memory_is_refused_fast_with_the_estimate() {
-    let t = std::time::Instant::now();
+fn a_film_larger_than_memory_is_refused_with_the_estimate() {
+    // 100000² pixels: had the render started, its allocations would abort
     let (code, err) = run_err(&[
         "render",
         "-q",
@@ -270,7 +270,6 @@ fn a_film_larger_than_memory_is_refused_fast_with_the_estimate() {
         "-o",
         "x.exr",
     ]);
-    assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
     assert_eq!(code, Some(1));
     assert!(err.contains("the film 100000×100000 needs about"), "{err}");
     assert!(err.contains("GiB are available; pass --force"), "{err}");
