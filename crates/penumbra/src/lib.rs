@@ -1,6 +1,6 @@
 //! Penumbra: a physics-based differentiable Monte Carlo renderer.
 //!
-//! See `DESIGN.md` in the repository for the architecture and the
+//! See `docs/architecture.md` in the repository for the architecture and the
 //! mathematics (interior vs boundary derivatives, detached sampling, path
 //! replay) that the code follows.
 

@@ -211,7 +211,7 @@ mod tests {
         }
     }
 
-    /// Consistent sampling derivatives (DESIGN.md §1): the derivative of
+    /// Consistent sampling derivatives (docs/architecture.md §1): the derivative of
     /// J(α) = ∫ f(ωi, ωo; α) h(ωo) dωo estimated with detached sampling
     /// (sampled ωo and its pdf are constants, only f is differentiated)
     /// matches the derivative of J by quadrature; the mixed estimator that

@@ -1,8 +1,7 @@
-//! Derivative estimators: forward (tangent) mode, and (to come) path-replay
-//! reverse mode and boundary terms. They return through the doors fixed in
-//! DESIGN.md §3: forward mode gives a derivative image for a tangent over
-//! the parameters; reverse mode gives gradients for every differentiable
-//! parameter.
+//! Derivative estimators: forward (tangent) mode, path-replay reverse mode,
+//! and (to come) boundary terms (docs/architecture.md §4). Forward mode
+//! gives a derivative image for a tangent over the parameters; reverse mode
+//! gives gradients for every differentiable parameter.
 
 mod check;
 mod forward;

@@ -1,6 +1,6 @@
 //! Warps from the unit square to common domains, each with its density.
 //! Sampling is plain f32: sampled points are constants for differentiation
-//! (detached sampling, DESIGN.md §1).
+//! (detached sampling, docs/architecture.md §1).
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
