@@ -3,6 +3,8 @@
 //! the mesh without them; a NaN vertex position stays an error that names
 //! the file and the vertex.
 
+mod common;
+
 use penumbra::geometry::{Shape, SkippedFaces};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
@@ -19,20 +21,11 @@ const BAD_FACES: &str = "f 3 2 1\nf 1 2 5\nf 2 2 3\n";
 fn scene_with_light(dir: &Path, name: &str, obj: &str) -> Scene {
     let obj_path = dir.join(format!("{name}.obj"));
     std::fs::write(&obj_path, obj).unwrap();
+    let sensor = common::sensor_xml("0, 1, 3", 60.0, 16, 4, None);
     let xml = format!(
         r#"<scene version="3.0.0">
             <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-            <sensor type="perspective">
-                <float name="fov" value="60"/>
-                <transform name="to_world">
-                    <lookat origin="0, 1, 3" target="0, 0, 0" up="0, 1, 0"/>
-                </transform>
-                <film type="hdrfilm">
-                    <integer name="width" value="16"/>
-                    <integer name="height" value="16"/>
-                </film>
-                <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
-            </sensor>
+            {sensor}
             <shape type="rectangle">
                 <transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/></transform>
             </shape>

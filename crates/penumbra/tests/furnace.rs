@@ -4,26 +4,18 @@
 //! Russian roulette. Any energy gain or loss (BSDF normalisation, MIS
 //! weights, emitter pdfs, roulette weights) shows as a mean ≠ 1.
 
+mod common;
+
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
 use std::path::Path;
 
 fn furnace(bsdf: &str) -> (f64, f64) {
+    let sensor = common::sensor_xml("0, 0, 4", 30.0, 32, 64, Some("box"));
     let xml = format!(
         r#"<scene version="3.0.0">
             <integrator type="path"/>
-            <sensor type="perspective">
-                <float name="fov" value="30"/>
-                <transform name="to_world">
-                    <lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-                </transform>
-                <film type="hdrfilm">
-                    <integer name="width" value="32"/>
-                    <integer name="height" value="32"/>
-                    <rfilter type="box"/>
-                </film>
-                <sampler type="independent"><integer name="sample_count" value="64"/></sampler>
-            </sensor>
+            {sensor}
             <shape type="sphere">{bsdf}</shape>
             <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
         </scene>"#

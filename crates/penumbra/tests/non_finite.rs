@@ -8,26 +8,19 @@
 //! estimation, Le · f · cos / pdf = 3e38 · (1/π) · cos · 4π, which
 //! overflows f32 for cos > 0.28.
 
+mod common;
+
 use penumbra::diff::{render_backward, render_forward};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
 use std::path::Path;
 
 fn scene(radiance: &str) -> Scene {
+    let sensor = common::sensor_xml("0, 0, 4", 30.0, 16, 4, None);
     let xml = format!(
         r#"<scene version="3.0.0">
             <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-            <sensor type="perspective">
-                <float name="fov" value="30"/>
-                <transform name="to_world">
-                    <lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-                </transform>
-                <film type="hdrfilm">
-                    <integer name="width" value="16"/>
-                    <integer name="height" value="16"/>
-                </film>
-                <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
-            </sensor>
+            {sensor}
             <bsdf type="diffuse" id="white"><rgb name="reflectance" value="1, 1, 1"/></bsdf>
             <shape type="sphere"><ref id="white"/></shape>
             <emitter type="constant"><rgb name="radiance" value="{radiance}"/></emitter>
