@@ -37,8 +37,8 @@ fn derivative_image(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
         ));
     }
     let (block, non_finite_samples) =
-        render_samples(scene, opts, 3, "forward mode", |ray, rng, out| {
-            if let Some(l) = integrator.radiance::<Dual>(scene, ray, rng) {
+        render_samples(scene, opts, 3, "forward mode", |cs, rng, out| {
+            if let Some(l) = integrator.radiance::<Dual>(scene, cs, rng) {
                 out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
             }
         })?;

@@ -247,7 +247,8 @@ fn backward_pass(
         let mut sample_grads = SampleGrads::new();
         let mut non_finite = 0usize;
         let mut delta = [0.0f32; 3];
-        layout.for_each_sample(tile, |pos, ray, rng| {
+        layout.for_each_sample(tile, |pos, cs, rng| {
+            let ray = cs.ray::<f32>(&scene.params).val();
             weights.gather_adjoint(filter, pos.x, pos.y, d_image, &mut delta);
             if delta == [0.0; 3] {
                 return;

@@ -28,6 +28,44 @@ impl Ray {
     }
 }
 
+/// A ray whose origin and direction are differentiable: the camera ray
+/// (a function of the sensor's parameters) and rays leaving a delta
+/// bounce (functions of the hit point and its normal). The acceleration
+/// structure traces its primal value ([`DiffRay::val`]); the hit is then
+/// re-evaluated in `R` along it, so the point slides along the ray as the
+/// surface or the ray moves.
+#[derive(Clone, Copy, Debug)]
+pub struct DiffRay<R> {
+    pub o: V3<R>,
+    /// Unit direction.
+    pub d: V3<R>,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl<R: Real> DiffRay<R> {
+    /// A ray with constant origin and direction.
+    #[inline(always)]
+    pub fn cst(ray: &Ray) -> Self {
+        DiffRay {
+            o: V3::cst(ray.o),
+            d: V3::cst(ray.d),
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+        }
+    }
+    /// The primal ray.
+    #[inline(always)]
+    pub fn val(&self) -> Ray {
+        Ray {
+            o: self.o.val(),
+            d: self.d.val(),
+            tmin: self.tmin,
+            tmax: self.tmax,
+        }
+    }
+}
+
 /// What the acceleration structure reports: which primitive was hit, where
 /// along the ray, and the primitive's own surface coordinates (barycentrics
 /// `(b1, b2)` for triangles). Everything else is re-evaluated, in `R`, by

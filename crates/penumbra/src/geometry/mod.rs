@@ -13,6 +13,6 @@ pub mod shape;
 pub mod shapes;
 
 pub use accel::Accel;
-pub use interaction::{Hit, PositionSample, Ray, SurfaceInteraction};
+pub use interaction::{DiffRay, Hit, PositionSample, Ray, SurfaceInteraction};
 pub use mesh::{Mesh, MeshData, MeshOptions, SkippedFaces};
 pub use shape::{Shape, ShapeT, SHAPE_PLUGINS};

@@ -5,7 +5,7 @@
 use super::Integrator;
 use crate::bsdf::BsdfT;
 use crate::error::Result;
-use crate::geometry::Ray;
+use crate::sensor::CameraSample;
 use crate::sampler::SampleStream;
 use crate::scene::{Class, Node, Scene};
 
@@ -98,13 +98,20 @@ impl AovIntegrator {
         names
     }
 
-    pub fn sample(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream, out: &mut [f32]) {
+    pub fn sample(
+        &self,
+        scene: &Scene,
+        cs: &CameraSample,
+        rng: &mut SampleStream,
+        out: &mut [f32],
+    ) {
         let mut k = 0;
         if let Some(n) = &self.nested {
             let c = n.channel_count();
-            n.sample(scene, ray, rng, &mut out[..c]);
+            n.sample(scene, cs, rng, &mut out[..c]);
             k = c;
         }
+        let ray = cs.ray::<f32>(&scene.params).val();
         let hit = scene.intersect(&ray);
         let si = hit.map(|h| (h, scene.surface_interaction::<f32>(&ray, &h)));
         for (_, kind) in &self.aovs {

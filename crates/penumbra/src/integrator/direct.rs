@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
-use crate::geometry::Ray;
+use crate::sensor::CameraSample;
 use crate::math::{Spectrum, V3};
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
@@ -32,7 +32,13 @@ impl DirectIntegrator {
         })
     }
 
-    pub fn sample<R: Real>(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream) -> Spectrum<R> {
+    pub fn sample<R: Real>(
+        &self,
+        scene: &Scene,
+        cs: &CameraSample,
+        rng: &mut SampleStream,
+    ) -> Spectrum<R> {
+        let ray = cs.ray::<R>(&scene.params).val();
         let store = &scene.params;
         let Some(hit) = scene.intersect(&ray) else {
             return match scene.environment {

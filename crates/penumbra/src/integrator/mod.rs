@@ -13,7 +13,7 @@ pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::Ray;
+use crate::sensor::CameraSample;
 use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
@@ -59,12 +59,18 @@ impl Integrator {
 
     /// Primal estimate along `ray`, written to `out` (`channel_count()`
     /// values).
-    pub fn sample(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream, out: &mut [f32]) {
+    pub fn sample(
+        &self,
+        scene: &Scene,
+        cs: &CameraSample,
+        rng: &mut SampleStream,
+        out: &mut [f32],
+    ) {
         if let Integrator::Aov(a) = self {
-            return a.sample(scene, ray, rng, out);
+            return a.sample(scene, cs, rng, out);
         }
         let rgb = self
-            .radiance::<f32>(scene, ray, rng)
+            .radiance::<f32>(scene, cs, rng)
             .expect("path and direct integrators estimate radiance");
         out[..3].copy_from_slice(&rgb.val().to_array());
     }
@@ -75,12 +81,12 @@ impl Integrator {
     pub fn radiance<R: Real>(
         &self,
         scene: &Scene,
-        ray: Ray,
+        cs: &CameraSample,
         rng: &mut SampleStream,
     ) -> Option<Spectrum<R>> {
         match self {
-            Integrator::Path(p) => Some(p.sample::<R>(scene, ray, rng)),
-            Integrator::Direct(d) => Some(d.sample::<R>(scene, ray, rng)),
+            Integrator::Path(p) => Some(p.sample::<R>(scene, cs, rng)),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, cs, rng)),
             Integrator::Aov(_) => None,
         }
     }

@@ -8,6 +8,7 @@ use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::geometry::Ray;
+use crate::sensor::CameraSample;
 use crate::math::{Spectrum, V3};
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
@@ -34,7 +35,13 @@ impl PathIntegrator {
     }
 
     /// Radiance arriving along `ray`, estimated with one path.
-    pub fn sample<R: Real>(&self, scene: &Scene, ray: Ray, rng: &mut SampleStream) -> Spectrum<R> {
+    pub fn sample<R: Real>(
+        &self,
+        scene: &Scene,
+        cs: &CameraSample,
+        rng: &mut SampleStream,
+    ) -> Spectrum<R> {
+        let ray = cs.ray::<R>(&scene.params).val();
         let mut sink = Accumulate(Spectrum::zero());
         self.trace(scene, ray, rng, &mut sink);
         sink.0

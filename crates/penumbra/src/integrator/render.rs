@@ -4,11 +4,10 @@
 //! number of threads.
 
 use crate::error::{Error, Result};
-use crate::geometry::Ray;
 use crate::image::ImageBlock;
 use crate::sampler::SampleStream;
 use crate::scene::Scene;
-use crate::sensor::Sensor;
+use crate::sensor::{CameraSample, Sensor};
 use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -77,14 +76,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
         names.insert(3.min(n), "A".into());
     }
     let (block, non_finite_samples) =
-        render_samples(scene, opts, names.len(), "render", |ray, rng, out| {
+        render_samples(scene, opts, names.len(), "render", |cs, rng, out| {
             if alpha {
                 // colour, alpha, then any further (AOV) channels
                 let mut buf = [0.0f32; 64];
                 let rest = &mut buf[..n];
-                integrator.sample(scene, ray, rng, rest);
+                integrator.sample(scene, cs, rng, rest);
                 let k = 3.min(n);
                 out[..k].copy_from_slice(&rest[..k]);
+                let ray = cs.ray::<f32>(&scene.params).val();
                 out[k] = if scene.intersect(&ray).is_some() {
                     1.0
                 } else {
@@ -92,7 +92,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
                 };
                 out[k + 1..].copy_from_slice(&rest[k..]);
             } else {
-                integrator.sample(scene, ray, rng, out)
+                integrator.sample(scene, cs, rng, out)
             }
         })?;
     Ok(Rendered {
@@ -238,10 +238,14 @@ impl<'a> SampleLayout<'a> {
         self.sensor.film.crop_size
     }
 
-    /// Calls `f(film position, camera ray, sample stream)` for every sample
-    /// of every pixel of `tile`, in a fixed order.
+    /// Calls `f(film position in pixels, camera sample, sample stream)` for
+    /// every sample of every pixel of `tile`, in a fixed order.
     #[inline]
-    pub fn for_each_sample(&self, tile: Tile, mut f: impl FnMut(Vec2, Ray, &mut SampleStream)) {
+    pub fn for_each_sample(
+        &self,
+        tile: Tile,
+        mut f: impl FnMut(Vec2, &CameraSample, &mut SampleStream),
+    ) {
         let sensor = self.sensor;
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
@@ -252,8 +256,12 @@ impl<'a> SampleLayout<'a> {
                     let u = rng.next_2d();
                     let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
                     let lens_u = if self.lens { rng.next_2d() } else { Vec2::ZERO };
-                    let ray = sensor.sample_ray((pos + self.crop_off) * self.inv_size, lens_u);
-                    f(pos, ray, &mut rng);
+                    let cs = CameraSample {
+                        sensor,
+                        film: (pos + self.crop_off) * self.inv_size,
+                        lens: lens_u,
+                    };
+                    f(pos, &cs, &mut rng);
                 }
             }
         }
@@ -332,7 +340,7 @@ pub(crate) fn render_samples<F>(
     sample: F,
 ) -> Result<(ImageBlock, usize)>
 where
-    F: Fn(Ray, &mut SampleStream, &mut [f32]) + Sync,
+    F: Fn(&CameraSample, &mut SampleStream, &mut [f32]) + Sync,
 {
     let layout = SampleLayout::new(scene, opts)?;
     layout.check_memory(scene, opts, channels, false)?;
@@ -348,9 +356,9 @@ where
         );
         let mut out = vec![0.0f32; channels];
         let mut non_finite = 0usize;
-        layout.for_each_sample(tile, |pos, ray, rng| {
+        layout.for_each_sample(tile, |pos, cs, rng| {
             out.fill(0.0);
-            sample(ray, rng, &mut out);
+            sample(cs, rng, &mut out);
             if out.iter().all(|v| v.is_finite()) {
                 block.put(filter, pos.x, pos.y, &out);
             } else {

@@ -10,8 +10,10 @@ pub use orthographic::Orthographic;
 pub use perspective::Perspective;
 pub use thinlens::ThinLens;
 
+use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::Ray;
+use crate::geometry::{DiffRay, Ray};
+use crate::params::ParamStore;
 use crate::image::{Film, ReconstructionFilter};
 use crate::sampler::{Independent, Sampler};
 use crate::scene::{Class, Node};
@@ -23,6 +25,27 @@ pub enum Camera {
     Perspective(Perspective),
     ThinLens(ThinLens),
     Orthographic(Orthographic),
+}
+
+/// The primary sample of one path: where on the film and on the lens the
+/// path starts. These are constants of the integral (the pixel filter does
+/// not move with the parameters); the sensor turns them into a ray in `R`,
+/// so the ray follows the sensor's parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraSample<'a> {
+    pub sensor: &'a Sensor,
+    /// Film position in [0,1]² over the full film ((0,0) = top-left).
+    pub film: Vec2,
+    /// Lens position in [0,1]² (used by cameras with an aperture).
+    pub lens: Vec2,
+}
+
+impl CameraSample<'_> {
+    /// The camera ray of this sample, in `R`.
+    #[inline]
+    pub fn ray<R: Real>(&self, store: &ParamStore) -> DiffRay<R> {
+        self.sensor.ray(store, self.film, self.lens)
+    }
 }
 
 /// A camera with its film and sampler.
@@ -87,6 +110,13 @@ impl Sensor {
             Camera::ThinLens(c) => c.sample_ray(pos, lens),
             Camera::Orthographic(c) => c.sample_ray(pos),
         }
+    }
+
+    /// The ray through film position `film` and lens position `lens`, in
+    /// `R` (see [`CameraSample`]).
+    #[inline]
+    pub fn ray<R: Real>(&self, _store: &ParamStore, film: Vec2, lens: Vec2) -> DiffRay<R> {
+        DiffRay::cst(&self.sample_ray(film, lens))
     }
 
     /// True if rays need a lens sample (thin lens with an aperture).
