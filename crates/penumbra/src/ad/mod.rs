@@ -47,6 +47,10 @@ pub trait Real:
     + MulAssign
     + DivAssign
 {
+    /// Whether the type carries derivatives (false for `f32`): code that
+    /// only exists to give derivatives (re-evaluations whose primal value
+    /// is known) is skipped for the primal image.
+    const DIFFERENTIABLE: bool = true;
     /// A constant: its derivative is zero.
     fn cst(v: f32) -> Self;
     /// The primal value, detached from any derivative.
@@ -118,6 +122,7 @@ pub trait Real:
 }
 
 impl Real for f32 {
+    const DIFFERENTIABLE: bool = false;
     #[inline(always)]
     fn cst(v: f32) -> Self {
         v

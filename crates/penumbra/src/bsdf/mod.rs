@@ -297,6 +297,7 @@ pub(crate) fn detach_si<R: Real>(si: &SurfaceInteraction<R>) -> SurfaceInteracti
         },
         uv: V2::new(si.uv.x.val(), si.uv.y.val()),
         wi: c(si.wi),
+        area_scale: si.area_scale.val(),
         shape: si.shape,
         prim: si.prim,
     }

@@ -79,6 +79,7 @@ pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
         },
         uv: V2::new(R::cst(0.5), R::cst(0.5)),
         wi: V3::cst(wi),
+        area_scale: R::cst(1.0),
         shape: 0,
         prim: 0,
     }

@@ -3,7 +3,7 @@
 //! derivative image along a tangent direction costs one extra pass of the
 //! same code (like Mitsuba's `render_forward`).
 
-use super::check_no_discontinuous;
+use super::warn_missing_boundary_terms;
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
@@ -19,7 +19,7 @@ pub fn render_forward(
     opts: &RenderOptions,
 ) -> Result<Rendered> {
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    check_no_discontinuous(scene, &keys)?;
+    warn_missing_boundary_terms(scene, &keys)?;
     scene.params.clear_tangents();
     for (key, t) in tangents {
         scene.params.set_tangent(key, t)?;

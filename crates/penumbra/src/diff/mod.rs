@@ -11,7 +11,7 @@ pub use check::{check_gradient, CheckOptions, CheckReport, Estimate};
 pub use forward::render_forward;
 pub use prb::{render_backward, GradEntry, Gradients};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::scene::Scene;
 
 /// The seed of a gradient pass (reverse or forward mode) that follows a
@@ -28,24 +28,36 @@ pub fn gradient_seed(seed: u64) -> u64 {
     seed ^ 0x9e37_79b9
 }
 
-/// Fails if a parameter with a non-zero tangent or a requested gradient
-/// moves visibility discontinuities (vertex positions, transforms): their
-/// derivatives need boundary terms, which no integrator computes yet, and
-/// an interior-only estimate would be silently wrong.
-pub(crate) fn check_no_discontinuous(scene: &Scene, keys: &[&str]) -> Result<()> {
+/// Warns (once per call, naming the keys) when derivatives are requested
+/// for parameters that move visibility discontinuities (vertex positions,
+/// transforms, the camera): the integrators estimate the interior term of
+/// their derivative only; the boundary terms of primary visibility
+/// (silhouettes) and of shadows are not estimated yet, so the result is
+/// biased wherever such an edge moves. Not an error: the interior term is
+/// exact in scenes where no edge moves, and is what users optimise with
+/// today; never silent.
+pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<()> {
+    let mut moving = Vec::new();
     for key in keys {
         let id = scene.params.require(key)?;
         if scene.params.get(id).flags.discontinuous {
-            return Err(Error::Param {
-                key: key.to_string(),
-                msg: "derivatives with respect to geometry need boundary terms \
-                      (silhouettes, shadow edges), which Penumbra's integrators do not \
-                      compute yet; refusing to return an interior-only estimate"
-                    .into(),
-            });
+            moving.push(*key);
         }
     }
+    if !moving.is_empty() {
+        crate::warn(missing_boundary_terms_message(&moving));
+    }
     Ok(())
+}
+
+/// The warning of [`warn_missing_boundary_terms`].
+pub fn missing_boundary_terms_message(keys: &[&str]) -> String {
+    format!(
+        "{} move(s) geometry or the camera: only the interior term of the derivative is \
+         estimated; the boundary terms of primary visibility (silhouettes) and of shadows \
+         are missing, so derivatives are biased where a silhouette or shadow edge moves",
+        keys.join(", ")
+    )
 }
 
 #[cfg(test)]

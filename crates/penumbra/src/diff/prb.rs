@@ -1,30 +1,32 @@
-//! Reverse mode by path replay (Vicini et al. 2021, "Path Replay
-//! Backpropagation", Algorithm 2; after Nimier-David et al. 2020,
-//! "Radiative Backpropagation").
+//! Reverse mode, one path at a time.
 //!
-//! For each sample, the primal path is traced once (f32) to get its
-//! radiance L; then the same path is replayed with the same random numbers
-//! on [`Var`]s carrying the adjoint radiance δL = ∂loss/∂L. At every vertex
-//! only the local terms are recorded: the radiance this vertex adds
-//! (emission, next-event estimation) and the weight `w` of the scattering
-//! that continues the path; the rest of the path's radiance, `L_rem`, is
-//! known from the primal value (`L` minus what earlier vertices added), so
-//! the vertex's derivative is that of `local(θ) + L_rem · w(θ) / w`. The
-//! throughput is detached. Memory is the parameter and image buffers only,
-//! whatever the path length and sample count.
+//! Each sample's path is traced once on [`Var`]s, which record the path's
+//! computation on a thread-local tape; its radiance L is then
+//! back-propagated with the adjoint radiance δL = ∂loss/∂L of the sample
+//! (gathered from the adjoint image through the pixel filter) and the tape
+//! is cleared. The derivative is exactly that of the sample's estimate, in
+//! the parameterisation the integrator uses (see `crate::integrator::scatter`),
+//! whatever couples the vertices: with attached geometry a vertex depends
+//! on the previous ones (the camera ray, the chain of delta bounces, the
+//! direction between two moving points), which a per-vertex replay
+//! (Vicini et al. 2021, "Path Replay Backpropagation", where only
+//! material parameters move) cannot follow.
+//!
+//! Memory: the tape holds one path (a few hundred nodes per vertex, kept
+//! by each worker thread), plus the parameter and image buffers; it does
+//! not grow with the image size or the sample count. Unlike Mitsuba's
+//! megakernel on a GPU, one CPU thread owns one path at a time, so storing
+//! that path's tape costs kilobytes.
 
-use super::check_no_discontinuous;
+use super::warn_missing_boundary_terms;
 use crate::ad::reverse::{backward, clear_tape};
-use crate::ad::{Real, Var};
+use crate::ad::Var;
 use crate::error::{Error, Result};
 use crate::image::ImageBlock;
-use crate::integrator::path::{Accumulate, PathSink};
 use crate::integrator::render::{report_non_finite, SampleLayout};
 use crate::integrator::{Integrator, RenderOptions};
-use crate::math::{Spectrum, V3};
 use crate::params::ParamId;
 use crate::scene::Scene;
-use glam::Vec3;
 use std::borrow::Cow;
 use std::collections::HashMap;
 
@@ -63,59 +65,6 @@ type TileGrads = HashMap<(u32, u32), f64>;
 /// kept apart until the sample is known to be finite.
 type SampleGrads = Vec<(u32, u32, f64)>;
 
-/// The path-replay sink: records one vertex at a time and backpropagates.
-struct Replay<'a> {
-    /// Radiance of the path still to come (primal).
-    l_rem: Vec3,
-    /// ∂loss/∂L of this sample.
-    delta: Vec3,
-    /// This vertex's radiance contributions, recorded.
-    local: Spectrum<Var>,
-    grads: &'a mut SampleGrads,
-}
-
-impl PathSink<Var> for Replay<'_> {
-    fn add(&mut self, l: Spectrum<Var>) {
-        self.local += l;
-    }
-
-    fn next_throughput(&mut self, throughput: Spectrum<Var>, w: Spectrum<Var>) -> Spectrum<Var> {
-        // detached: derivatives of the weights are taken at their vertex
-        V3::cst(throughput.val() * w.val())
-    }
-
-    fn end_vertex(&mut self, w: Option<Spectrum<Var>>) {
-        self.l_rem -= self.local.val();
-        let mut objective = self.local;
-        if let Some(w) = w {
-            // L_rem · w(θ) / w: the later radiance scales with this weight
-            let scale = |w: Var, l: f32| {
-                let wv = w.val();
-                if wv != 0.0 && w.is_attached() {
-                    w * (l / wv)
-                } else {
-                    Var::cst(0.0)
-                }
-            };
-            objective += V3::new(
-                scale(w.x, self.l_rem.x),
-                scale(w.y, self.l_rem.y),
-                scale(w.z, self.l_rem.z),
-            );
-        }
-        let grads = &mut *self.grads;
-        backward(
-            &[
-                (objective.x, self.delta.x),
-                (objective.y, self.delta.y),
-                (objective.z, self.delta.z),
-            ],
-            |id, i, g| grads.push((id.0, i as u32, g as f64)),
-        );
-        self.local = Spectrum::zero();
-    }
-}
-
 /// Gradients of a loss with respect to scene parameters, given
 /// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major,
 /// or × 4 with an rgba film, whose alpha entries are ignored; any other
@@ -129,11 +78,11 @@ pub fn render_backward(
     keys: Option<&[&str]>,
     opts: &RenderOptions,
 ) -> Result<Gradients> {
-    let Integrator::Path(path) = scene.integrator.clone() else {
+    if let Integrator::Aov(_) = scene.integrator {
         return Err(Error::Invalid(
-            "reverse mode (path replay) needs the path integrator".into(),
+            "the aov integrator has no derivatives; use path or direct".into(),
         ));
-    };
+    }
     let film = &scene.sensor(opts.sensor)?.film;
     let (cw, ch) = film.crop_size;
     let d_image: Cow<[f32]> = if film.alpha && d_image.len() == cw * ch * 4 {
@@ -171,7 +120,7 @@ pub fn render_backward(
     }
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            check_no_discontinuous(scene, keys)?;
+            warn_missing_boundary_terms(scene, keys)?;
             keys.iter()
                 .map(|k| {
                     let id = scene.params.require(k)?;
@@ -193,7 +142,7 @@ pub fn render_backward(
             .collect(),
     };
     scene.params.set_grad_enabled(&ids);
-    let result = backward_pass(scene, &path, &d_image, opts);
+    let result = backward_pass(scene, &d_image, opts);
     scene.params.set_grad_enabled(&[]);
     let (sums, non_finite_samples) = result?;
     Ok(Gradients {
@@ -214,7 +163,6 @@ pub fn render_backward(
 
 fn backward_pass(
     scene: &Scene,
-    path: &crate::integrator::PathIntegrator,
     d_image: &[f32],
     opts: &RenderOptions,
 ) -> Result<(Vec<Vec<f64>>, usize)> {
@@ -248,27 +196,25 @@ fn backward_pass(
         let mut non_finite = 0usize;
         let mut delta = [0.0f32; 3];
         layout.for_each_sample(tile, |pos, cs, rng| {
-            let ray = cs.ray::<f32>(&scene.params).val();
             weights.gather_adjoint(filter, pos.x, pos.y, d_image, &mut delta);
             if delta == [0.0; 3] {
                 return;
             }
-            let mut replay_rng = rng.clone();
-            let mut primal = Accumulate(Spectrum::<f32>::zero());
-            path.trace(scene, ray, rng, &mut primal);
-            if !primal.0.is_finite() {
+            clear_tape();
+            let l = scene
+                .integrator
+                .radiance::<Var>(scene, cs, rng)
+                .expect("path and direct integrators estimate radiance");
+            if !l.val().is_finite() {
                 non_finite += 1;
+                clear_tape();
                 return;
             }
-            clear_tape();
             sample_grads.clear();
-            let mut replay = Replay {
-                l_rem: primal.0.val(),
-                delta: Vec3::from(delta),
-                local: Spectrum::zero(),
-                grads: &mut sample_grads,
-            };
-            path.trace::<Var, _>(scene, ray, &mut replay_rng, &mut replay);
+            backward(
+                &[(l.x, delta[0]), (l.y, delta[1]), (l.z, delta[2])],
+                |id, i, g| sample_grads.push((id.0, i as u32, g as f64)),
+            );
             if sample_grads.iter().all(|g| g.2.is_finite()) {
                 for &(id, i, g) in &sample_grads {
                     *grads.entry((id, i)).or_default() += g;

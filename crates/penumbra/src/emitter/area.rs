@@ -1,10 +1,10 @@
 //! Mitsuba's `area` emitter: a shape that emits radiance from the side its
 //! normal points to.
 
-use super::{emission_prop, surface_si, DirectionSample, EmitterT};
+use super::{emission_prop, DirectionSample, EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{PositionSample, Shape, ShapeT, SurfaceInteraction};
+use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
 use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
@@ -32,13 +32,21 @@ impl Area {
     /// seen from `ref_p`: solid-angle density `pdf_A · dist² / |cos θ_e|`
     /// and weight `L / pdf`. `None` when `ref_p` is behind the emitting
     /// side or coincides with the sample.
+    ///
+    /// `y` is the sampled point re-evaluated in `R` (moving with the
+    /// emitter's shape, [`ShapeT::point_at`]): the direction and weight
+    /// follow it and `ref_p`. The sample's density is a constant, so the
+    /// weight carries the derivative of the Jacobian from the emitter's
+    /// area to solid angle at `ref_p`, `area_scale · |cos θ_e| / dist²`
+    /// (Zhang et al. 2020, "Path-Space Differentiable Rendering", §4).
     pub fn sample_from_position<R: Real>(
         &self,
         store: &ParamStore,
         ps: &PositionSample,
-        ref_p: Vec3,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
-        let to = ps.p - ref_p;
+        mut y: SurfaceInteraction<R>,
+        ref_p: V3<R>,
+    ) -> Option<EmitterSample<R>> {
+        let to = ps.p - ref_p.val();
         let dist2 = to.length_squared();
         if !(dist2 > 0.0) || !(ps.pdf > 0.0) {
             return None;
@@ -51,8 +59,12 @@ impl Area {
             return None;
         }
         let pdf = ps.pdf * dist2 / cos_e;
-        let si = surface_si::<R>(ps.p, ps.n, ps.uv, -d, self.shape, ps.prim);
-        let l = self.radiance.eval(store, &si);
+        let to_r = y.p - ref_p;
+        let dist2_r = to_r.length_squared();
+        let d_r = to_r / dist2_r.sqrt();
+        y.set_wi(-d_r);
+        let jacobian = y.area_scale * -d_r.dot(y.n) / dist2_r;
+        let l = self.radiance.eval(store, &y);
         let ds = DirectionSample {
             p: ps.p,
             n: ps.n,
@@ -61,7 +73,11 @@ impl Area {
             pdf,
             delta: false,
         };
-        Some((ds, l.scale(1.0 / pdf)))
+        Some(EmitterSample {
+            ds,
+            d: d_r,
+            weight: l * (jacobian / (jacobian.val() * pdf)),
+        })
     }
 
     /// Solid-angle density of reaching emitter point `p` (normal `n`) along
@@ -81,12 +97,19 @@ impl EmitterT for Area {
         &self,
         store: &ParamStore,
         shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let shape = shapes.get(self.shape as usize)?;
         let ps = shape.sample_position(store, u);
-        self.sample_from_position(store, &ps, ref_p)
+        let hit = Hit {
+            t: 0.0,
+            shape: self.shape,
+            prim: ps.prim,
+            uv: ps.local,
+        };
+        let y = shape.point_at::<R>(store, &hit, ps.p);
+        self.sample_from_position(store, &ps, y, ref_p)
     }
 
     /// Assumes the shape's `sample_position` is uniform by area (density
@@ -133,6 +156,8 @@ impl EmitterT for Area {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
     use crate::emitter::{surface_si, Emitter};
@@ -152,9 +177,15 @@ mod tests {
             p: C + EX * (2.0 * u.x - 1.0) + EY * (2.0 * u.y - 1.0),
             n: N,
             uv: u,
+            local: u,
             pdf: 1.0 / AREA,
             prim: 0,
         }
+    }
+
+    /// The rectangle's sample as a (constant) surface interaction.
+    fn ps_si<R: Real>(ps: &PositionSample) -> SurfaceInteraction<R> {
+        surface_si(ps.p, ps.n, ps.uv, -ps.n, 3, ps.prim)
     }
 
     /// Where the ray from `o` along `d` meets the rectangle, if it does.
@@ -195,7 +226,7 @@ mod tests {
         let r = test.run(
             |rng| {
                 let ps = sample_rect(rng.next_2d());
-                let (ds, w) = a.sample_from_position::<f32>(s, &ps, ref_p)?;
+                let EmitterSample { ds, weight: w, .. } = a.sample_from_position::<f32>(s, &ps, ps_si(&ps), V3::cst(ref_p))?;
                 let pdf = Area::pdf_from_area(1.0 / AREA, ref_p, ds.d, ds.p, ds.n);
                 assert!((pdf - ds.pdf).abs() <= 1e-4 * pdf);
                 assert!(!ds.delta && (ds.dist - (ds.p - ref_p).length()).abs() < 1e-5);
@@ -221,7 +252,12 @@ mod tests {
         // behind the emitting side: nothing to sample
         let behind = Vec3::new(0.0, 0.0, 2.0);
         assert!(a
-            .sample_from_position::<f32>(s, &sample_rect(Vec2::splat(0.3)), behind)
+            .sample_from_position::<f32>(
+                s,
+                &sample_rect(Vec2::splat(0.3)),
+                ps_si(&sample_rect(Vec2::splat(0.3))),
+                V3::cst(behind)
+            )
             .is_none());
         assert_eq!(Area::pdf_from_area(1.0 / AREA, behind, -Vec3::Z, C, N), 0.0);
         let front = surface_si::<f32>(C, N, Vec2::ZERO, -Vec3::Z, 3, 0);
@@ -237,8 +273,8 @@ mod tests {
             .set_tangent("light.emitter.radiance.value", &[0.0, 0.0, 1.0])
             .unwrap();
         let ps = sample_rect(Vec2::new(0.5, 0.5));
-        let (ds, w) = a
-            .sample_from_position::<Dual>(&ctx.store, &ps, Vec3::ZERO)
+        let EmitterSample { ds, weight: w, .. } = a
+            .sample_from_position::<Dual>(&ctx.store, &ps, ps_si(&ps), V3::cst(Vec3::ZERO))
             .unwrap();
         assert!((w.z.d - 1.0 / ds.pdf).abs() < 1e-5 && w.x.d == 0.0);
         // straight below the centre: pdf = dist² / (A cos θ) = 1/6

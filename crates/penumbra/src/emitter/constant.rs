@@ -1,6 +1,8 @@
 //! Mitsuba's `constant` emitter: the same radiance from every direction.
 
-use super::{emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterT};
+use super::{
+    emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterSample, EmitterT,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
@@ -33,20 +35,20 @@ impl EmitterT for Constant {
         &self,
         store: &ParamStore,
         _shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let d = warp::square_to_uniform_sphere(u);
         let pdf = warp::UNIFORM_SPHERE_PDF;
         let ds = DirectionSample {
-            p: far_point(&self.bounds, ref_p, d),
+            p: far_point(&self.bounds, ref_p.val(), d),
             n: -d,
             d,
             dist: f32::INFINITY,
             pdf,
             delta: false,
         };
-        Some((
+        Some(EmitterSample::fixed_direction(
             ds,
             eval_uniform::<R>(&self.radiance, store).scale(1.0 / pdf),
         ))
@@ -79,6 +81,8 @@ impl EmitterT for Constant {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
     use crate::emitter::Emitter;
@@ -103,7 +107,7 @@ mod tests {
         let ref_p = Vec3::new(0.3, -0.2, 0.1);
         let r = Chi2Test::default().run(
             |rng| {
-                let (ds, w) = e.sample_direction::<f32>(s, &[], ref_p, rng.next_2d())?;
+                let EmitterSample { ds, weight: w, .. } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
                 assert!((ds.pdf - 1.0 / (4.0 * PI)).abs() < 1e-7);
                 assert!(!ds.delta && ds.dist.is_infinite());
                 // weight = radiance / pdf, and pdf_direction agrees
@@ -128,8 +132,8 @@ mod tests {
         ctx.store
             .set_tangent("sky.radiance.value", &[0.0, 1.0, 0.0])
             .unwrap();
-        let (_, w) = e
-            .sample_direction::<Dual>(&ctx.store, &[], Vec3::ZERO, Vec2::new(0.2, 0.7))
+        let EmitterSample { weight: w, .. } = e
+            .sample_direction::<Dual>(&ctx.store, &[], V3::cst(Vec3::ZERO), Vec2::new(0.2, 0.7))
             .unwrap();
         assert!((w.y.d - 4.0 * PI).abs() < 1e-4 && w.x.d == 0.0);
         let l = e.eval_environment::<Dual>(&ctx.store, Vec3::X);

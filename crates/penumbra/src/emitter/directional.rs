@@ -2,11 +2,11 @@
 //! away.
 
 use super::{delta_light_queries, emission_prop, eval_uniform, far_point, vec3_or_to_world};
-use super::{BoundingSphere, DirectionSample, EmitterT};
+use super::{BoundingSphere, DirectionSample, EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
-use crate::math::Spectrum;
+use crate::math::V3;
 use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
@@ -47,19 +47,22 @@ impl EmitterT for Directional {
         &self,
         store: &ParamStore,
         _shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         _u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let d = -self.direction;
         let ds = DirectionSample {
-            p: far_point(&self.bounds, ref_p, d),
+            p: far_point(&self.bounds, ref_p.val(), d),
             n: self.direction,
             d,
             dist: f32::INFINITY,
             pdf: 1.0,
             delta: true,
         };
-        Some((ds, eval_uniform::<R>(&self.irradiance, store)))
+        Some(EmitterSample::fixed_direction(
+            ds,
+            eval_uniform::<R>(&self.irradiance, store),
+        ))
     }
     delta_light_queries!();
 }
@@ -67,6 +70,8 @@ impl EmitterT for Directional {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
     use crate::scene::Value;
@@ -84,8 +89,8 @@ mod tests {
         );
         let mut e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         e.set_scene_bounds(Vec3::ZERO, 3.0 * 3f32.sqrt());
-        let (ds, w) = e
-            .sample_direction::<f32>(&ctx.store, &[], Vec3::ZERO, Vec2::ZERO)
+        let EmitterSample { ds, weight: w, .. } = e
+            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::ZERO), Vec2::ZERO)
             .unwrap();
         assert_eq!(w.val(), Vec3::splat(2.0));
         assert_eq!(

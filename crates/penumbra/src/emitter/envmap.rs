@@ -1,7 +1,7 @@
 //! Mitsuba's `envmap` emitter: radiance at infinity from a
 //! latitude-longitude image, importance-sampled by luminance.
 
-use super::{far_point, BoundingSphere, DirectionSample, EmitterT};
+use super::{far_point, BoundingSphere, DirectionSample, EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
@@ -186,9 +186,9 @@ impl EmitterT for Envmap {
         &self,
         store: &ParamStore,
         _shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let dist = self.distribution.as_ref()?;
         let (s, pdf_s) = dist.sample(u);
         if !(pdf_s > 0.0) {
@@ -209,14 +209,14 @@ impl EmitterT for Envmap {
         let g = Vec2::new(s.x * w, s.y * (self.height - 1) as f32);
         let l = self.lookup::<R>(store, g);
         let ds = DirectionSample {
-            p: far_point(&self.bounds, ref_p, d),
+            p: far_point(&self.bounds, ref_p.val(), d),
             n: -d,
             d,
             dist: f32::INFINITY,
             pdf,
             delta: false,
         };
-        Some((ds, l.scale(1.0 / pdf)))
+        Some(EmitterSample::fixed_direction(ds, l.scale(1.0 / pdf)))
     }
 
     fn pdf_direction(
@@ -259,6 +259,8 @@ impl EmitterT for Envmap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
     use crate::emitter::Emitter;
@@ -358,7 +360,7 @@ mod tests {
         let mut mismatches = 0usize;
         let r = test.run(
             |rng| {
-                let (ds, wgt) = e.sample_direction::<f32>(s, &[], ref_p, rng.next_2d())?;
+                let EmitterSample { ds, weight: wgt, .. } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
                 let pdf = e.pdf_direction(s, &[], ref_p, ds.d, ds.p, ds.n);
                 let want = e.eval_environment::<f32>(s, ds.d).val() / pdf;
                 // f32 round-off in the direction (~1e-6) moves u by
@@ -403,7 +405,7 @@ mod tests {
         let mut rng = crate::testing::Pcg32::new(3);
         let mut n_ok = 0;
         for _ in 0..2000 {
-            let Some((ds, w)) = e.sample_direction::<f32>(s, &[], Vec3::ZERO, rng.next_2d()) else {
+            let Some(EmitterSample { ds, weight: w, .. }) = e.sample_direction::<f32>(s, &[], V3::cst(Vec3::ZERO), rng.next_2d()) else {
                 continue;
             };
             n_ok += 1;

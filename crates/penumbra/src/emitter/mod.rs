@@ -71,6 +71,7 @@ pub(crate) fn surface_si<R: Real>(
         sh_frame: frame,
         uv: V2::cst(uv),
         wi,
+        area_scale: R::cst(1.0),
         shape,
         prim,
     }
@@ -118,24 +119,28 @@ pub(crate) fn vec3_or_to_world(
 
 /// The direction sample of a light at the point `p` (point, spot) seen
 /// from `ref_p`: unit direction and distance to `p`, pdf 1, delta, no
-/// normal; with the squared distance for the inverse-square falloff.
-/// `None` when `ref_p` is at the light.
-pub(crate) fn point_light_sample(p: Vec3, ref_p: Vec3) -> Option<(DirectionSample, f32)> {
-    let to = p - ref_p;
+/// normal; with the direction and squared distance (for the inverse-square
+/// falloff) in `R`, following the reference point. `None` when `ref_p` is
+/// at the light.
+pub(crate) fn point_light_sample<R: Real>(
+    p: Vec3,
+    ref_p: V3<R>,
+) -> Option<(DirectionSample, V3<R>, R)> {
+    let to = V3::cst(p) - ref_p;
     let dist2 = to.length_squared();
-    if !(dist2 > 0.0) {
+    if !(dist2.val() > 0.0) {
         return None;
     }
-    let dist = dist2.sqrt();
+    let d = to / dist2.sqrt();
     let ds = DirectionSample {
         p,
         n: Vec3::ZERO,
-        d: to / dist,
-        dist,
+        d: d.val(),
+        dist: dist2.val().sqrt(),
         pdf: 1.0,
         delta: true,
     };
-    Some((ds, dist2))
+    Some((ds, d, dist2))
 }
 
 /// The [`EmitterT`] queries of a delta light (`point`, `spot`,
@@ -179,6 +184,29 @@ macro_rules! delta_light_queries {
 }
 pub(crate) use delta_light_queries;
 
+/// An emitter sample in `R`: the primal sample, the unit direction from the
+/// reference point to the sampled point, and the weight `radiance / pdf`,
+/// both attached to the reference point and the emitter's parameters (the
+/// sampled point moves with the emitter; the density is a constant).
+#[derive(Clone, Copy, Debug)]
+pub struct EmitterSample<R> {
+    pub ds: DirectionSample,
+    pub d: V3<R>,
+    pub weight: Spectrum<R>,
+}
+
+impl<R: Real> EmitterSample<R> {
+    /// A sample whose direction does not move (environment and
+    /// directional emitters: their points are at infinity).
+    pub(crate) fn fixed_direction(ds: DirectionSample, weight: Spectrum<R>) -> Self {
+        EmitterSample {
+            d: V3::cst(ds.d),
+            ds,
+            weight,
+        }
+    }
+}
+
 /// A direction sampled towards an emitter from a reference point.
 #[derive(Clone, Copy, Debug)]
 pub struct DirectionSample {
@@ -206,9 +234,9 @@ pub trait EmitterT {
         &self,
         store: &ParamStore,
         shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)>;
+    ) -> Option<EmitterSample<R>>;
     /// Solid-angle density of sampling the emitter point hit along `d` from
     /// `ref_p` (`p`, `n`: the hit point and its normal; unused by
     /// environment emitters).
@@ -262,9 +290,9 @@ impl EmitterT for Emitter {
         &self,
         store: &ParamStore,
         shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         dispatch!(self, e => e.sample_direction(store, shapes, ref_p, u))
     }
     #[inline]

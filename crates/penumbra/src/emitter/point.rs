@@ -2,12 +2,12 @@
 
 use super::{
     delta_light_queries, emission_prop, eval_uniform, point_light_sample, vec3_or_to_world,
-    DirectionSample, EmitterT,
+    EmitterSample, EmitterT,
 };
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
-use crate::math::Spectrum;
+use crate::math::V3;
 use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
@@ -39,12 +39,16 @@ impl EmitterT for Point {
         &self,
         store: &ParamStore,
         _shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         _u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
-        let (ds, dist2) = point_light_sample(self.position, ref_p)?;
+    ) -> Option<EmitterSample<R>> {
+        let (ds, d, dist2) = point_light_sample(self.position, ref_p)?;
         let i = eval_uniform::<R>(&self.intensity, store);
-        Some((ds, i.scale(1.0 / dist2)))
+        Some(EmitterSample {
+            ds,
+            d,
+            weight: i * dist2.recip(),
+        })
     }
     delta_light_queries!();
 }
@@ -52,6 +56,8 @@ impl EmitterT for Point {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
@@ -70,8 +76,8 @@ mod tests {
         );
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         let ref_p = Vec3::new(0.0, 0.0, 3.0);
-        let (ds, w) = e
-            .sample_direction::<f32>(&ctx.store, &[], ref_p, Vec2::splat(0.5))
+        let EmitterSample { ds, weight: w, .. } = e
+            .sample_direction::<f32>(&ctx.store, &[], V3::cst(ref_p), Vec2::splat(0.5))
             .unwrap();
         // Mitsuba: weight 0.5, d (0,0,-1), dist 2, pdf 1, delta
         assert_eq!(w.val(), Vec3::splat(0.5));
@@ -83,8 +89,8 @@ mod tests {
         ctx.store
             .set_tangent("lamp.intensity.value", &[1.0, 0.0, 0.0])
             .unwrap();
-        let (_, w) = e
-            .sample_direction::<Dual>(&ctx.store, &[], ref_p, Vec2::splat(0.5))
+        let EmitterSample { weight: w, .. } = e
+            .sample_direction::<Dual>(&ctx.store, &[], V3::cst(ref_p), Vec2::splat(0.5))
             .unwrap();
         assert_eq!((w.x.d, w.y.d), (0.25, 0.0));
     }

@@ -2,11 +2,11 @@
 //! linear falloff between the beam width and the cutoff angle.
 
 use super::{delta_light_queries, emission_prop, eval_uniform, point_light_sample};
-use super::{DirectionSample, EmitterT};
+use super::{EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
-use crate::math::{Spectrum, Transform};
+use crate::math::{Transform, V3};
 use crate::params::ParamStore;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
@@ -50,15 +50,16 @@ impl Spot {
     /// The angular falloff for an emitted direction `local` (unit, in the
     /// light's frame): 1 inside the beam, `(cutoff − θ) / (cutoff − beam)`
     /// in the transition, 0 outside the cutoff.
-    pub fn falloff(&self, local: Vec3) -> f32 {
+    pub fn falloff<R: Real>(&self, local: V3<R>) -> R {
         let cos_theta = local.z;
-        if !(cos_theta > self.cutoff.cos()) {
-            return 0.0;
+        if !(cos_theta.val() > self.cutoff.cos()) {
+            return R::cst(0.0);
         }
-        if cos_theta >= self.beam_width.cos() {
-            return 1.0;
+        if cos_theta.val() >= self.beam_width.cos() {
+            return R::cst(1.0);
         }
-        ((self.cutoff - cos_theta.clamp(-1.0, 1.0).acos()) / (self.cutoff - self.beam_width))
+        ((R::cst(self.cutoff) - cos_theta.clamp(-1.0, 1.0).acos())
+            / (self.cutoff - self.beam_width))
             .clamp(0.0, 1.0)
     }
 }
@@ -70,18 +71,25 @@ impl EmitterT for Spot {
         &self,
         store: &ParamStore,
         _shapes: &[Shape],
-        ref_p: Vec3,
+        ref_p: V3<R>,
         _u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let pos = self.to_world.point(Vec3::ZERO);
-        let (ds, dist2) = point_light_sample(pos, ref_p)?;
-        let local = self.to_world.inverse().vector(-(pos - ref_p)).normalize();
+        let (ds, d, dist2) = point_light_sample(pos, ref_p)?;
+        // the direction from the light to ref_p in the light's frame
+        let inv = self.to_world.inverse().m;
+        let row = |i: usize| V3::cst(inv.row(i).truncate());
+        let local = V3::new(-row(0).dot(d), -row(1).dot(d), -row(2).dot(d)).normalize();
         let f = self.falloff(local);
-        if !(f > 0.0) {
+        if !(f.val() > 0.0) {
             return None;
         }
         let i = eval_uniform::<R>(&self.intensity, store);
-        Some((ds, i.scale(f / dist2)))
+        Some(EmitterSample {
+            ds,
+            d,
+            weight: i * (f / dist2),
+        })
     }
     delta_light_queries!();
 }
@@ -89,6 +97,8 @@ impl EmitterT for Spot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
     use crate::scene::Value;
@@ -119,9 +129,9 @@ mod tests {
         ] {
             let a = deg.to_radians();
             let p = Vec3::new(2.0 * a.sin(), 0.0, 2.0 * a.cos());
-            let r = e.sample_direction::<f32>(&ctx.store, &[], p, Vec2::ZERO);
+            let r = e.sample_direction::<f32>(&ctx.store, &[], V3::cst(p), Vec2::ZERO);
             match (r, want) {
-                (Some((ds, w)), Some(want)) => {
+                (Some(EmitterSample { ds, weight: w, .. }), Some(want)) => {
                     assert!(
                         (w.val() - Vec3::splat(want)).abs().max_element() < 1e-5,
                         "{deg}: {w:?}"
@@ -150,16 +160,16 @@ mod tests {
         );
         let s = Spot::from_node(&n, &mut LoadContext::default()).unwrap();
         assert!((s.beam_width.to_degrees() - 30.0).abs() < 1e-4);
-        assert_eq!(s.falloff(Vec3::Z), 1.0);
+        assert_eq!(s.falloff::<f32>(V3::cst(Vec3::Z)), 1.0);
         let d = |deg: f32| Vec3::new(deg.to_radians().sin(), 0.0, deg.to_radians().cos());
-        assert!((s.falloff(d(35.0)) - 0.5).abs() < 1e-5);
+        assert!((s.falloff::<f32>(V3::cst(d(35.0))) - 0.5).abs() < 1e-5);
         let mut ctx = LoadContext::default();
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         assert!(e
-            .sample_direction::<f32>(&ctx.store, &[], Vec3::new(0.0, 0.0, 0.0), Vec2::ZERO)
+            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::new(0.0, 0.0, 0.0)), Vec2::ZERO)
             .is_some());
         assert!(e
-            .sample_direction::<f32>(&ctx.store, &[], Vec3::new(0.0, 0.0, 10.0), Vec2::ZERO)
+            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::new(0.0, 0.0, 10.0)), Vec2::ZERO)
             .is_none());
     }
 }

@@ -90,13 +90,25 @@ pub struct SurfaceInteraction<R> {
     /// Shading frame (shading normal in `sh_frame.n`).
     pub sh_frame: Frame<R>,
     pub uv: V2<R>,
-    /// Direction towards the ray origin, in the shading frame.
+    /// Direction towards the previous path vertex (the ray origin), in
+    /// the shading frame.
     pub wi: V3<R>,
+    /// Surface area per unit area of the shape's own surface coordinates
+    /// (twice the triangle area for barycentrics): its ratio to its primal
+    /// value is the Jacobian of a point that moves with the surface.
+    pub area_scale: R,
     pub shape: u32,
     pub prim: u32,
 }
 
 impl<R: Real> SurfaceInteraction<R> {
+    /// Sets `wi` to the world direction `d` (unit, pointing away from the
+    /// surface towards the previous vertex).
+    #[inline(always)]
+    pub fn set_wi(&mut self, d: V3<R>) {
+        self.wi = self.to_local(d);
+    }
+
     #[inline(always)]
     pub fn to_world(&self, v: V3<R>) -> V3<R> {
         self.sh_frame.to_world(v)
@@ -142,13 +154,19 @@ impl<R: Real> SurfaceInteraction<R> {
 }
 
 /// A point sampled on a surface (for emitter sampling). Sampling is
-/// detached: the point, normal and density are constants.
+/// detached: the point, normal and density are constants; the point is
+/// re-evaluated in `R` from `prim` and `local` (see
+/// [`crate::geometry::ShapeT::point_at`]).
 #[derive(Clone, Copy, Debug)]
 pub struct PositionSample {
     pub p: Vec3,
     /// Unit surface normal at `p` (oriented as the shape defines it).
     pub n: Vec3,
     pub uv: Vec2,
+    /// The shape's own surface coordinates of `p` (as [`Hit::uv`]:
+    /// barycentrics `(b1, b2)` for triangles), so the point can be
+    /// re-evaluated in `R`, moving with the shape.
+    pub local: Vec2,
     /// Density with respect to surface area.
     pub pdf: f32,
     pub prim: u32,

@@ -29,7 +29,7 @@
 
 use crate::ad::Real;
 use crate::error::{Error, Result};
-use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use glam::{Vec2, Vec3};
@@ -353,24 +353,27 @@ impl Mesh {
         }
     }
 
-    /// Differentiable re-evaluation of a ray hit on triangle `prim`:
-    /// Möller–Trumbore (Möller and Trumbore 1997, "Fast, Minimum Storage
-    /// Ray/Triangle Intersection") in `R` from the vertex positions read
-    /// through the store, so t, p, uv and the normals depend on them.
+    /// The vertex indices and positions (in `R`) of triangle `prim`.
+    #[inline(always)]
+    fn triangle_r<R: Real>(&self, store: &ParamStore, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
+        let [i0, i1, i2] = self.faces[prim as usize];
+        let idx = [i0 as usize, i1 as usize, i2 as usize];
+        (idx, idx.map(|i| store.read3(self.positions, i)))
+    }
+
+    /// Differentiable re-evaluation of a ray hit on triangle `hit.prim`,
+    /// the point sliding along `ray` (whose origin and direction may carry
+    /// derivatives): Möller–Trumbore (Möller and Trumbore 1997, "Fast,
+    /// Minimum Storage Ray/Triangle Intersection") in `R` from the vertex
+    /// positions read through the store.
     pub fn triangle_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
-        let prim = hit.prim as usize;
-        let [i0, i1, i2] = self.faces[prim];
-        let (i0, i1, i2) = (i0 as usize, i1 as usize, i2 as usize);
-        let p0: V3<R> = store.read3(self.positions, i0);
-        let p1: V3<R> = store.read3(self.positions, i1);
-        let p2: V3<R> = store.read3(self.positions, i2);
-        let o = V3::<R>::cst(ray.o);
-        let d = V3::<R>::cst(ray.d);
+        let (idx, [p0, p1, p2]) = self.triangle_r::<R>(store, hit.prim);
+        let (o, d) = (ray.o, ray.d);
         let e1 = p1 - p0;
         let e2 = p2 - p0;
         let pvec = d.cross(e2);
@@ -383,10 +386,43 @@ impl Mesh {
         } else {
             (R::cst(hit.t), R::cst(hit.uv.x), R::cst(hit.uv.y))
         };
-        let b0 = R::cst(1.0) - b1 - b2;
         let p = o + d * t;
+        let mut si = self.local_geometry(store, hit, idx, [p0, p1, p2], b1, b2, p, t);
+        si.wi = si.to_local(-d);
+        si
+    }
 
-        let mut n = e1.cross(e2).normalize();
+    /// The point of triangle `hit.prim` at the fixed barycentrics `hit.uv`,
+    /// moving with the triangle's vertices; `wi` is left zero.
+    pub fn triangle_point<R: Real>(&self, store: &ParamStore, hit: &Hit) -> SurfaceInteraction<R> {
+        let (idx, [p0, p1, p2]) = self.triangle_r::<R>(store, hit.prim);
+        let (b1, b2) = (R::cst(hit.uv.x), R::cst(hit.uv.y));
+        let p = p0 * (R::cst(1.0) - b1 - b2) + p1 * b1 + p2 * b2;
+        self.local_geometry(store, hit, idx, [p0, p1, p2], b1, b2, p, R::cst(hit.t))
+    }
+
+    /// Normals, uv and shading frame at barycentrics (b1, b2) of a
+    /// triangle with vertex indices `idx` and positions `ps`; `wi` zero.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn local_geometry<R: Real>(
+        &self,
+        store: &ParamStore,
+        hit: &Hit,
+        idx: [usize; 3],
+        ps: [V3<R>; 3],
+        b1: R,
+        b2: R,
+        p: V3<R>,
+        t: R,
+    ) -> SurfaceInteraction<R> {
+        let [i0, i1, i2] = idx;
+        let b0 = R::cst(1.0) - b1 - b2;
+        let e1 = ps[1] - ps[0];
+        let e2 = ps[2] - ps[0];
+        let cross = e1.cross(e2);
+        let area_scale = cross.length();
+        let mut n = cross / area_scale;
         let (uv, dpdu) = match self.texcoords {
             Some(tid) => {
                 let read2 = |i: usize| {
@@ -426,15 +462,14 @@ impl Mesh {
             n = -n;
             ns = -ns;
         }
-        let sh_frame = Frame::from_normal_tangent(ns, dpdu);
-        let wi = sh_frame.to_local(-d);
         SurfaceInteraction {
             t,
             p,
             n,
-            sh_frame,
+            sh_frame: Frame::from_normal_tangent(ns, dpdu),
             uv,
-            wi,
+            wi: V3::zero(),
+            area_scale,
             shape: hit.shape,
             prim: hit.prim,
         }
@@ -445,10 +480,14 @@ impl ShapeT for Mesh {
     fn surface_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
         self.triangle_interaction(store, ray, hit)
+    }
+
+    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, _p: Vec3) -> SurfaceInteraction<R> {
+        self.triangle_point(store, hit)
     }
 
     /// Picks a triangle by area, then a uniform point in it; the density is
@@ -472,6 +511,7 @@ impl ShapeT for Mesh {
             p,
             n: self.face_n[f],
             uv,
+            local: b,
             pdf: 1.0 / self.area,
             prim: f as u32,
         }
@@ -570,6 +610,7 @@ pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{DiffRay, Ray};
     use crate::ad::Dual;
 
     fn tet() -> MeshData {
@@ -810,7 +851,7 @@ mod tests {
             prim: 3,
             uv: Vec2::ZERO,
         };
-        let si0 = m.surface_interaction::<f32>(&store, &ray, &hit);
+        let si0 = m.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &hit);
         let b = (si0.uv, si0.t);
         assert!(b.1 > 0.0);
         let base: Vec<f32> = store.data(m.positions).to_vec();
@@ -819,12 +860,12 @@ mod tests {
             let mut tan = vec![0.0; base.len()];
             tan[k] = 1.0;
             store.set_tangent("m.vertex_positions", &tan).unwrap();
-            let sd = m.surface_interaction::<Dual>(&store, &ray, &hit);
+            let sd = m.surface_interaction::<Dual>(&store, &DiffRay::cst(&ray), &hit);
             let eval = |store: &mut ParamStore, delta: f32| {
                 let mut p = base.clone();
                 p[k] += delta;
                 store.set("m.vertex_positions", &p).unwrap();
-                m.surface_interaction::<f32>(store, &ray, &hit)
+                m.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &hit)
             };
             let sp = eval(&mut store, eps);
             let sm = eval(&mut store, -eps);
@@ -857,7 +898,7 @@ mod tests {
         let mut tan = vec![0.0; base.len()];
         tan[0] = 1.0;
         store.set_tangent("m.vertex_positions", &tan).unwrap();
-        let sd = m.surface_interaction::<Dual>(&store, &ray, &hit);
+        let sd = m.surface_interaction::<Dual>(&store, &DiffRay::cst(&ray), &hit);
         assert_eq!(sd.t.d, 0.0);
     }
 
@@ -887,14 +928,14 @@ mod tests {
             prim: 0,
             uv: Vec2::ZERO,
         };
-        let si = m.surface_interaction::<f32>(&s2, &ray, &hit);
+        let si = m.surface_interaction::<f32>(&s2, &DiffRay::cst(&ray), &hit);
         assert!((si.t - 5.0).abs() < 1e-5);
         assert!((si.p.val() - Vec3::new(0.2, 0.3, 0.0)).length() < 1e-6);
         // face 0 = (0,2,1): normal -z, barycentric uv without texcoords
         assert!((si.n.val() - -Vec3::Z).length() < 1e-6);
         assert!((si.uv.val() - Vec2::new(0.3, 0.2)).length() < 1e-6);
         assert!(si.wi.z < 0.0, "viewer on the back side: {:?}", si.wi);
-        let sf = mf.surface_interaction::<f32>(&store, &ray, &hit);
+        let sf = mf.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &hit);
         assert!((sf.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.sh_frame.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.wi.z - 1.0).abs() < 1e-5);

@@ -6,21 +6,30 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::shapes::{self, Disk, Sphere};
-use crate::geometry::{Hit, PositionSample, Ray, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, PositionSample, SurfaceInteraction};
 use crate::params::{ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// What every shape plugin provides.
 pub trait ShapeT {
     /// Re-evaluates the hit reported by the acceleration structure, in `R`,
-    /// from the shape's parameters.
+    /// from the shape's parameters, the point sliding along `ray` (the
+    /// parameterisation of a point found by a ray whose direction is a
+    /// constant or a function of the parameters: camera rays, delta
+    /// bounces).
     fn surface_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R>;
+    /// The point of the surface with the surface coordinates of the hit
+    /// (`hit.uv` for triangles; analytic shapes take them from the primal
+    /// point `p`), moving with the shape: the parameterisation of points
+    /// sampled on a surface (Zhang et al. 2020, "Path-Space Differentiable
+    /// Rendering", material form). `wi` is left zero.
+    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R>;
     /// Samples a point uniformly with respect to surface area.
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample;
     /// Total surface area.
@@ -139,13 +148,21 @@ impl ShapeT for Shape {
     fn surface_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
         match self {
             Shape::Mesh(m) => m.surface_interaction(store, ray, hit),
             Shape::Sphere(s) => s.surface_interaction(store, ray, hit),
             Shape::Disk(d) => d.surface_interaction(store, ray, hit),
+        }
+    }
+    #[inline]
+    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+        match self {
+            Shape::Mesh(m) => m.point_at(store, hit, p),
+            Shape::Sphere(s) => s.point_at(store, hit, p),
+            Shape::Disk(d) => d.point_at(store, hit, p),
         }
     }
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -167,6 +184,7 @@ impl ShapeT for Shape {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{DiffRay, Ray};
     use crate::ad::Dual;
     use crate::error::SrcLoc;
     use crate::math::Transform;
@@ -247,7 +265,7 @@ mod tests {
         let store = &ctx.store;
         let ray = Ray::new(Vec3::new(1.0, 0.5, 5.0), -Vec3::Z);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &ray, &h);
+        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         // local (0.5, 0.5) -> uv (0.75, 0.75)
         assert!(
@@ -266,7 +284,7 @@ mod tests {
         .unwrap();
         let ray = Ray::new(Vec3::new(0.5, 0.5, 5.0), -Vec3::Z);
         let h = hit_of(&s, &ctx.store, &ray);
-        let si = s.surface_interaction::<f32>(&ctx.store, &ray, &h);
+        let si = s.surface_interaction::<f32>(&ctx.store, &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         // world x = 0.5 is local x = -0.5
         assert!(
@@ -286,7 +304,7 @@ mod tests {
         for d in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z] {
             let ray = Ray::new(d * 5.0 + d.any_orthonormal_vector() * 0.3, -d);
             let h = hit_of(&s, store, &ray);
-            let si = s.surface_interaction::<f32>(store, &ray, &h);
+            let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
             assert!((si.n.val() - d).length() < 1e-6, "{d}");
             assert!((si.sh_frame.n.val() - d).length() < 1e-6, "{d}");
             assert!((h.t - 4.0).abs() < 1e-5);
@@ -317,7 +335,7 @@ mod tests {
         let dir = Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos());
         let ray = Ray::new(c + dir * 3.0, -dir);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &ray, &h);
+        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
         assert!((si.t - 2.5).abs() < 1e-5);
         assert!((si.n.val() - dir).length() < 1e-5);
         assert!((si.uv.val() - Vec2::new(ph / (2.0 * PI), th / PI)).length() < 1e-5);
@@ -325,7 +343,7 @@ mod tests {
         // φ < 0 wraps to [0, 2π)
         let dir2 = Vec3::new(0.0, -1.0, 0.0);
         let r2 = Ray::new(c + dir2 * 3.0, -dir2);
-        let si2 = s.surface_interaction::<f32>(store, &r2, &hit_of(&s, store, &r2));
+        let si2 = s.surface_interaction::<f32>(store, &DiffRay::cst(&r2), &hit_of(&s, store, &r2));
         assert!((si2.uv.x - 0.75).abs() < 1e-5, "{:?}", si2.uv);
         // flip_normals: inward
         let mut ctx = LoadContext::default();
@@ -335,7 +353,7 @@ mod tests {
         )
         .unwrap();
         let r3 = Ray::new(Vec3::new(0.0, 0.0, 4.0), -Vec3::Z);
-        let si3 = s.surface_interaction::<f32>(&ctx.store, &r3, &hit_of(&s, &ctx.store, &r3));
+        let si3 = s.surface_interaction::<f32>(&ctx.store, &DiffRay::cst(&r3), &hit_of(&s, &ctx.store, &r3));
         assert!((si3.n.val() + Vec3::Z).length() < 1e-6);
         let ps = s.sample_position(&ctx.store, Vec2::new(0.3, 0.8));
         assert!((ps.p.length() - 1.0).abs() < 1e-5 && (ps.n + ps.p).length() < 1e-5);
@@ -371,13 +389,13 @@ mod tests {
             tan[k] = 1.0;
             store.clear_tangents();
             store.set_tangent(key, &tan).unwrap();
-            let sd = s.surface_interaction::<Dual>(store, &ray, &h);
+            let sd = s.surface_interaction::<Dual>(store, &DiffRay::cst(&ray), &h);
             let eps = 1e-3;
             let mut ev = |delta: f32| {
                 let mut v = base.clone();
                 v[k] += delta;
                 store.set(key, &v).unwrap();
-                s.surface_interaction::<f32>(store, &ray, &h)
+                s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h)
             };
             let (sp, sm) = (ev(eps), ev(-eps));
             store.set(key, &base).unwrap();
@@ -410,7 +428,7 @@ mod tests {
         assert!((s.surface_area() - 4.0 * PI).abs() < 1e-4);
         let ray = Ray::new(Vec3::new(0.0, -1.0, 5.0), -Vec3::Z);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &ray, &h);
+        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         assert!(
             (si.uv.val() - Vec2::new(0.5, 0.75)).length() < 1e-5,

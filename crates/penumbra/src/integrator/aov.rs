@@ -5,6 +5,7 @@
 use super::Integrator;
 use crate::bsdf::BsdfT;
 use crate::error::Result;
+use crate::geometry::DiffRay;
 use crate::sensor::CameraSample;
 use crate::sampler::SampleStream;
 use crate::scene::{Class, Node, Scene};
@@ -113,7 +114,7 @@ impl AovIntegrator {
         }
         let ray = cs.ray::<f32>(&scene.params).val();
         let hit = scene.intersect(&ray);
-        let si = hit.map(|h| (h, scene.surface_interaction::<f32>(&ray, &h)));
+        let si = hit.map(|h| (h, scene.surface_interaction::<f32>(&DiffRay::cst(&ray), &h)));
         for (_, kind) in &self.aovs {
             let vals: [f32; 3] = match &si {
                 None => [0.0; 3],

@@ -1,13 +1,13 @@
 //! Direct illumination with multiple importance sampling of emitters and
 //! the BSDF (Mitsuba's `direct`).
 
-use super::mis_weight;
+use super::{mis_weight, scatter};
 use crate::ad::Real;
 use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::sensor::CameraSample;
-use crate::math::{Spectrum, V3};
+use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 
@@ -32,14 +32,17 @@ impl DirectIntegrator {
         })
     }
 
+    /// Radiance through the camera sample `cs`, in `R`, with every vertex
+    /// re-evaluated in `R` as the path integrator does.
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
         cs: &CameraSample,
         rng: &mut SampleStream,
     ) -> Spectrum<R> {
-        let ray = cs.ray::<R>(&scene.params).val();
         let store = &scene.params;
+        let camera_ray = cs.ray::<R>(store);
+        let ray = camera_ray.val();
         let Some(hit) = scene.intersect(&ray) else {
             return match scene.environment {
                 Some(env) if !self.hide_emitters => {
@@ -48,7 +51,7 @@ impl DirectIntegrator {
                 _ => Spectrum::zero(),
             };
         };
-        let si = scene.surface_interaction::<R>(&ray, &hit);
+        let si = scene.surface_interaction::<R>(&camera_ray, &hit);
         let mut result = Spectrum::<R>::zero();
         if let Some(em) = scene.shape_emitter(hit.shape) {
             if !self.hide_emitters {
@@ -60,16 +63,16 @@ impl DirectIntegrator {
         if bsdf.flags().has(BsdfFlags::SMOOTH) {
             for _ in 0..self.emitter_samples {
                 let u = rng.next_2d();
-                if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u) {
-                    let wo = si.to_local(V3::cst(ds.d)).val();
-                    let f = bsdf.eval(store, &si, wo);
-                    let w = if ds.delta {
+                if let Some(es) = scene.sample_emitter_direction::<R>(&si, u) {
+                    let wo = si.to_local(es.d);
+                    let f = bsdf.eval(store, &si, wo.val());
+                    let w = if es.ds.delta {
                         1.0 / ne
                     } else {
-                        let pb = bsdf.pdf(store, &si, wo);
-                        mis_weight(ne * ds.pdf, nb * pb) / ne
+                        let pb = bsdf.pdf(store, &si, wo.val());
+                        mis_weight(ne * es.ds.pdf, nb * pb) / ne
                     };
-                    result += f.mul_elem(em_weight) * R::cst(w);
+                    result += f.mul_elem(es.weight) * R::cst(w);
                 }
             }
         }
@@ -79,15 +82,13 @@ impl DirectIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 continue;
             };
-            let d = si.to_world(V3::cst(bs.wo)).val().normalize();
-            let delta = bs.lobe.has(BsdfFlags::DELTA);
-            let ray2 = si.spawn_ray(d);
-            let (le, em_pdf) = match scene.intersect(&ray2) {
-                Some(h2) => match scene.shape_emitter(h2.shape) {
+            let b = scatter(scene, bsdf, &si, &bs);
+            let d = b.ray.d;
+            let (le, em_pdf) = match (b.hit, b.next) {
+                (Some(h2), Some(si2)) => match scene.shape_emitter(h2.shape) {
                     Some(em) => {
-                        let si2 = scene.surface_interaction::<R>(&ray2, &h2);
                         let le = scene.emitters[em as usize].eval_surface(store, &si2);
-                        let pdf = if delta {
+                        let pdf = if b.delta {
                             0.0
                         } else {
                             scene.pdf_emitter_direction(em, si.p.val(), d, si2.p.val(), si2.n.val())
@@ -96,10 +97,10 @@ impl DirectIntegrator {
                     }
                     None => continue,
                 },
-                None => match scene.environment {
+                _ => match scene.environment {
                     Some(env) => {
                         let le = scene.emitters[env as usize].eval_environment(store, d);
-                        let pdf = if delta {
+                        let pdf = if b.delta {
                             0.0
                         } else {
                             scene.pdf_emitter_direction(env, si.p.val(), d, d, d)
@@ -109,12 +110,12 @@ impl DirectIntegrator {
                     None => continue,
                 },
             };
-            let w = if delta {
+            let w = if b.delta {
                 1.0 / nb
             } else {
                 mis_weight(nb * bs.pdf, ne * em_pdf) / nb
             };
-            result += bs.weight.mul_elem(le) * R::cst(w);
+            result += b.weight.mul_elem(le) * R::cst(w);
         }
         result
     }

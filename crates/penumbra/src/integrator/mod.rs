@@ -13,6 +13,9 @@ pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
 use crate::error::Result;
+use crate::bsdf::{Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
+use crate::math::V3;
 use crate::sensor::CameraSample;
 use crate::math::Spectrum;
 use crate::sampler::SampleStream;
@@ -89,6 +92,98 @@ impl Integrator {
             Integrator::Direct(d) => Some(d.sample::<R>(scene, cs, rng)),
             Integrator::Aov(_) => None,
         }
+    }
+}
+
+/// Where a path goes after scattering at `si` by the BSDF sample `bs`: the
+/// traced ray, the next vertex in `R`, and the weight of the bounce in `R`.
+pub(crate) struct Bounce<R> {
+    /// The ray traced from `si` (primal).
+    pub ray: Ray,
+    pub hit: Option<Hit>,
+    /// The next vertex, `wi` set (`None` if the ray escaped).
+    pub next: Option<SurfaceInteraction<R>>,
+    /// `f · cos / pdf` of the bounce, with the derivatives of the
+    /// parameterisation below.
+    pub weight: Spectrum<R>,
+    /// The sample came from a delta lobe.
+    pub delta: bool,
+}
+
+/// Traces the ray of BSDF sample `bs` from `si` and re-evaluates what it
+/// reaches in `R`, in a parameterisation of the path that does not move
+/// with the parameters (the interior term of the derivative; Zhang et al.
+/// 2020, "Path-Space Differentiable Rendering"; on which choices are valid:
+/// Worchel et al. 2025, arXiv 2504.05750):
+/// - after a smooth lobe, the sampled direction is a constant of the
+///   integral only at the primal parameters; the next vertex is the point
+///   of its surface with fixed surface coordinates, moving with that
+///   surface (material form). The direction between the two vertices
+///   follows both, the BSDF is re-evaluated along it, and the weight
+///   carries the Jacobian `area_scale · |cos θ'| / dist²` from the next
+///   surface's area to solid angle at `si` relative to its primal value
+///   (the sample density itself is a constant: detached sampling).
+/// - after a delta lobe, the direction is a function of `wi` and the
+///   normal: the ray leaves the attached point along the attached
+///   direction, and the next vertex slides along it.
+pub(crate) fn scatter<R: Real>(
+    scene: &Scene,
+    bsdf: &Bsdf,
+    si: &SurfaceInteraction<R>,
+    bs: &BsdfSample<R>,
+) -> Bounce<R> {
+    let delta = bs.lobe.has(BsdfFlags::DELTA);
+    let d = si.to_world(V3::cst(bs.wo)).normalize();
+    let ray = si.spawn_ray(d.val());
+    let hit = scene.intersect(&ray);
+    if delta || !R::DIFFERENTIABLE {
+        let dray = DiffRay {
+            o: si.p,
+            d,
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+        };
+        return Bounce {
+            ray,
+            hit,
+            next: hit.map(|h| scene.surface_interaction(&dray, &h)),
+            weight: bs.weight,
+            delta,
+        };
+    }
+    let (next, wo, jacobian) = match hit {
+        Some(h) => {
+            let mut next = scene.point_at::<R>(&h, ray.at(h.t));
+            let to = next.p - si.p;
+            let dist2 = to.length_squared();
+            let wo = to / dist2.sqrt();
+            next.set_wi(-wo);
+            let g = next.area_scale * wo.dot(next.n).abs() / dist2;
+            (Some(next), wo, g / g.val())
+        }
+        // towards the environment (at infinity): the direction is the constant
+        None => (None, d, R::cst(1.0)),
+    };
+    let f = bsdf.eval(&scene.params, si, si.to_local(wo).val());
+    // the sample's own weight as value, the derivative of f · J / pdf
+    let attach = |w: R, f: R| {
+        if f.val() != 0.0 {
+            f * (w.val() / f.val())
+        } else {
+            w
+        }
+    };
+    let weight = V3::new(
+        attach(bs.weight.x, f.x),
+        attach(bs.weight.y, f.y),
+        attach(bs.weight.z, f.z),
+    ) * jacobian;
+    Bounce {
+        ray,
+        hit,
+        next,
+        weight,
+        delta,
     }
 }
 

@@ -54,11 +54,11 @@ mod build;
 
 use crate::ad::Real;
 use crate::bsdf::Bsdf;
-use crate::emitter::{DirectionSample, Emitter, EmitterT};
+use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
-use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, Ray, Shape, ShapeT, SurfaceInteraction};
 use crate::integrator::Integrator;
-use crate::math::{DiscreteDistribution, Spectrum};
+use crate::math::DiscreteDistribution;
 use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
 use std::path::Path;
@@ -124,10 +124,22 @@ impl Scene {
         self.accel.occluded(ray)
     }
 
-    /// Re-evaluates a hit in `R` (see [`ShapeT::surface_interaction`]).
+    /// Re-evaluates a hit in `R`, the point sliding along `ray` (see
+    /// [`ShapeT::surface_interaction`]).
     #[inline]
-    pub fn surface_interaction<R: Real>(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction<R> {
+    pub fn surface_interaction<R: Real>(
+        &self,
+        ray: &DiffRay<R>,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
         self.shapes[hit.shape as usize].surface_interaction(&self.params, ray, hit)
+    }
+
+    /// Re-evaluates a hit in `R` as a point that moves with its shape (see
+    /// [`ShapeT::point_at`]); `p` is the primal hit point.
+    #[inline]
+    pub fn point_at<R: Real>(&self, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+        self.shapes[hit.shape as usize].point_at(&self.params, hit, p)
     }
 
     #[inline]
@@ -140,32 +152,33 @@ impl Scene {
         self.shape_info[shape as usize].emitter
     }
 
-    /// Samples an emitter (by `sampling_weight`), then a direction towards it from `si`,
-    /// and tests visibility. Returns the sample and `radiance / pdf`
-    /// (including the selection probability), or `None` if occluded.
+    /// Samples an emitter (by `sampling_weight`), then a direction towards
+    /// it from `si`, and tests visibility. Returns the sample with its
+    /// weight `radiance / pdf` (including the selection probability), in
+    /// `R` following `si.p` and the emitter, or `None` if occluded.
     pub fn sample_emitter_direction<R: Real>(
         &self,
         si: &SurfaceInteraction<R>,
         u: Vec2,
-    ) -> Option<(DirectionSample, Spectrum<R>)> {
+    ) -> Option<EmitterSample<R>> {
         let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
         let u = Vec2::new(ux, u.y);
-        let p = si.p.val();
-        let (mut ds, w) =
-            self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, p, u)?;
-        if !(ds.pdf > 0.0) {
+        let mut es =
+            self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, si.p, u)?;
+        if !(es.ds.pdf > 0.0) {
             return None;
         }
-        let ray = if ds.dist.is_finite() {
-            si.spawn_ray_to(ds.p)
+        let ray = if es.ds.dist.is_finite() {
+            si.spawn_ray_to(es.ds.p)
         } else {
-            si.spawn_ray(ds.d)
+            si.spawn_ray(es.ds.d)
         };
         if self.occluded(&ray) {
             return None;
         }
-        ds.pdf *= pick;
-        Some((ds, w * R::cst(1.0 / pick)))
+        es.ds.pdf *= pick;
+        es.weight = es.weight.scale(1.0 / pick);
+        Some(es)
     }
 
     /// Solid-angle density with which [`Scene::sample_emitter_direction`]

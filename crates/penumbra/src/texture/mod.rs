@@ -160,6 +160,7 @@ pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
         sh_frame: Frame::from_normal(n),
         uv: V2::cst(glam::Vec2::new(u, v)),
         wi: V3::cst(glam::Vec3::Z),
+        area_scale: R::cst(1.0),
         shape: 0,
         prim: 0,
     }

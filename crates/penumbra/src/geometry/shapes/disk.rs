@@ -9,7 +9,7 @@
 use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
@@ -135,16 +135,11 @@ impl ShapeT for Disk {
     fn surface_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
-        let id = self.to_world;
-        let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
-        let c = V3::new(m(0, 3), m(1, 3), m(2, 3));
-        let a0 = V3::new(m(0, 0), m(1, 0), m(2, 0));
-        let a1 = V3::new(m(0, 1), m(1, 1), m(2, 1));
-        let o = V3::<R>::cst(ray.o);
-        let d = V3::<R>::cst(ray.d);
+        let (c, a0, a1) = self.frame_r::<R>(store);
+        let (o, d) = (ray.o, ray.d);
         let nv = a0.cross(a1);
         let den = nv.dot(d);
         let t = if den.val() != 0.0 {
@@ -157,19 +152,25 @@ impl ShapeT for Disk {
         let nn = nv.dot(nv);
         let x = q.cross(a1).dot(nv) / nn;
         let y = a0.cross(q).dot(nv) / nn;
-        let rr = (x * x + y * y).safe_sqrt();
-        let phi = azimuth(y, x);
-        let uv = V2::new(rr, phi * (0.5 / PI));
-        let dpdu = if rr.val() > 0.0 {
-            (a0 * x + a1 * y) / rr
-        } else {
-            a0
-        };
-        let mut n = nv.normalize() * R::cst(self.normal_sign());
-        if self.flip_normals {
-            n = -n;
-        }
-        analytic_interaction(hit, d, t, p, n, dpdu, uv)
+        let mut si = self.local_geometry(hit, a0, a1, p, t, x, y);
+        si.set_wi(-d);
+        si
+    }
+
+    /// The point with the primal point's local disk coordinates, moving
+    /// with `to_world`.
+    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+        let f = self.frame(store);
+        let nv = f.a0.cross(f.a1);
+        let q = p - f.c;
+        let (x, y) = (
+            q.cross(f.a1).dot(nv) / nv.dot(nv),
+            f.a0.cross(q).dot(nv) / nv.dot(nv),
+        );
+        let (c, a0, a1) = self.frame_r::<R>(store);
+        let (x, y) = (R::cst(x), R::cst(y));
+        let p = c + a0 * x + a1 * y;
+        self.local_geometry(hit, a0, a1, p, R::cst(hit.t), x, y)
     }
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -184,6 +185,7 @@ impl ShapeT for Disk {
             p: f.c + f.a0 * l.x + f.a1 * l.y,
             n,
             uv: Vec2::new(l.length(), phi / (2.0 * PI)),
+            local: l,
             pdf: 1.0 / self.area,
             prim: 0,
         }
@@ -191,5 +193,48 @@ impl ShapeT for Disk {
 
     fn surface_area(&self) -> f32 {
         self.area
+    }
+}
+
+impl Disk {
+    /// Centre and images of the local x and y axes, in `R`.
+    fn frame_r<R: Real>(&self, store: &ParamStore) -> (V3<R>, V3<R>, V3<R>) {
+        let id = self.to_world;
+        let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
+        (
+            V3::new(m(0, 3), m(1, 3), m(2, 3)),
+            V3::new(m(0, 0), m(1, 0), m(2, 0)),
+            V3::new(m(0, 1), m(1, 1), m(2, 1)),
+        )
+    }
+
+    /// Normal, polar uv and shading frame at local coordinates (x, y),
+    /// world point `p`; the area scale is |a0 × a1|.
+    #[allow(clippy::too_many_arguments)]
+    fn local_geometry<R: Real>(
+        &self,
+        hit: &Hit,
+        a0: V3<R>,
+        a1: V3<R>,
+        p: V3<R>,
+        t: R,
+        x: R,
+        y: R,
+    ) -> SurfaceInteraction<R> {
+        let nv = a0.cross(a1);
+        let rr = (x * x + y * y).safe_sqrt();
+        let phi = azimuth(y, x);
+        let uv = V2::new(rr, phi * (0.5 / PI));
+        let dpdu = if rr.val() > 0.0 {
+            (a0 * x + a1 * y) / rr
+        } else {
+            a0
+        };
+        let mut n = nv.normalize() * R::cst(self.normal_sign());
+        if self.flip_normals {
+            n = -n;
+        }
+        let area_scale = nv.length();
+        analytic_interaction(hit, t, p, n, dpdu, uv, area_scale)
     }
 }

@@ -46,28 +46,29 @@ pub(crate) fn azimuth<R: Real>(y: R, x: R) -> R {
     phi
 }
 
-/// The interaction of ray direction `d` hitting an analytic shape at
-/// distance `t`, point `p`, with unit normal `n` (as oriented after
-/// `flip_normals`), tangent `dpdu` and surface coordinates `uv`: the
-/// shading frame from `n` and `dpdu`, `wi = −d` in it.
+/// The local geometry of an analytic shape at distance `t`, point `p`,
+/// with unit normal `n` (as oriented after `flip_normals`), tangent `dpdu`,
+/// surface coordinates `uv` and area scale `area_scale` (see
+/// [`SurfaceInteraction::area_scale`]): the shading frame from `n` and
+/// `dpdu`; `wi` zero.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn analytic_interaction<R: Real>(
     hit: &Hit,
-    d: V3<R>,
     t: R,
     p: V3<R>,
     n: V3<R>,
     dpdu: V3<R>,
     uv: V2<R>,
+    area_scale: R,
 ) -> SurfaceInteraction<R> {
-    let sh_frame = Frame::from_normal_tangent(n, dpdu);
-    let wi = sh_frame.to_local(-d);
     SurfaceInteraction {
         t,
         p,
         n,
-        sh_frame,
+        sh_frame: Frame::from_normal_tangent(n, dpdu),
         uv,
-        wi,
+        wi: V3::zero(),
+        area_scale,
         shape: hit.shape,
         prim: hit.prim,
     }

@@ -12,7 +12,7 @@
 use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::{Hit, PositionSample, Ray, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
@@ -141,13 +141,12 @@ impl ShapeT for Sphere {
     fn surface_interaction<R: Real>(
         &self,
         store: &ParamStore,
-        ray: &Ray,
+        ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
         let c: V3<R> = store.read3(self.center, 0);
         let r: R = store.read(self.radius, 0);
-        let o = V3::<R>::cst(ray.o);
-        let d = V3::<R>::cst(ray.d);
+        let (o, d) = (ray.o, ray.d);
         // both roots in R; keep the one the traversal found
         let oc = o - c;
         let b = oc.dot(d);
@@ -166,6 +165,55 @@ impl ShapeT for Sphere {
             -b
         };
         let p = o + d * t;
+        let mut si = self.local_geometry(hit, c, r, p, t);
+        si.set_wi(-d);
+        si
+    }
+
+    /// The point at the primal point's direction from the centre, in the
+    /// sphere's local frame: it moves with the centre and scales with the
+    /// radius.
+    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+        let c: V3<R> = store.read3(self.center, 0);
+        let r: R = store.read(self.radius, 0);
+        let dir = (p - c.val()).normalize();
+        let p = c + V3::cst(dir) * r;
+        self.local_geometry(hit, c, r, p, R::cst(hit.t))
+    }
+
+    fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
+        let (c, r) = self.center_radius(store);
+        let local = warp::square_to_uniform_sphere(u);
+        let nw = self.rot * local;
+        let theta = local.z.clamp(-1.0, 1.0).acos();
+        let phi = azimuth(local.y, local.x);
+        PositionSample {
+            p: c + nw * r,
+            n: if self.flip_normals { -nw } else { nw },
+            uv: Vec2::new(phi / (2.0 * PI), theta / PI),
+            local: Vec2::ZERO,
+            pdf: 1.0 / self.area,
+            prim: 0,
+        }
+    }
+
+    fn surface_area(&self) -> f32 {
+        self.area
+    }
+}
+
+impl Sphere {
+    /// Normal, uv and shading frame at point `p` of the sphere (centre `c`,
+    /// radius `r`); the area scale is r² (area per unit solid angle seen
+    /// from the centre).
+    fn local_geometry<R: Real>(
+        &self,
+        hit: &Hit,
+        c: V3<R>,
+        r: R,
+        p: V3<R>,
+        t: R,
+    ) -> SurfaceInteraction<R> {
         let mut n = (p - c) / r;
         // local frame (rotation is a constant)
         let (cx, cy, cz) = (self.rot.x_axis, self.rot.y_axis, self.rot.z_axis);
@@ -180,25 +228,6 @@ impl ShapeT for Sphere {
         if self.flip_normals {
             n = -n;
         }
-        analytic_interaction(hit, d, t, p, n, dpdu, uv)
-    }
-
-    fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
-        let (c, r) = self.center_radius(store);
-        let local = warp::square_to_uniform_sphere(u);
-        let nw = self.rot * local;
-        let theta = local.z.clamp(-1.0, 1.0).acos();
-        let phi = azimuth(local.y, local.x);
-        PositionSample {
-            p: c + nw * r,
-            n: if self.flip_normals { -nw } else { nw },
-            uv: Vec2::new(phi / (2.0 * PI), theta / PI),
-            pdf: 1.0 / self.area,
-            prim: 0,
-        }
-    }
-
-    fn surface_area(&self) -> f32 {
-        self.area
+        analytic_interaction(hit, t, p, n, dpdu, uv, r * r)
     }
 }
