@@ -62,7 +62,7 @@ impl DirectIntegrator {
                 let u = rng.next_2d();
                 if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u) {
                     let wo = si.to_local(V3::cst(ds.d)).val();
-                    let f = bsdf.eval(store, &si, wo);
+                    let f = bsdf.eval(store, &si, V3::cst(wo));
                     let w = if ds.delta {
                         1.0 / ne
                     } else {
@@ -79,7 +79,7 @@ impl DirectIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 continue;
             };
-            let d = si.to_world(V3::cst(bs.wo)).val().normalize();
+            let d = si.to_world(V3::cst(bs.wo.val())).val().normalize();
             let delta = bs.lobe.has(BsdfFlags::DELTA);
             let ray2 = si.spawn_ray(d);
             let (le, em_pdf) = match scene.intersect(&ray2) {

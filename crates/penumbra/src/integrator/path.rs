@@ -122,7 +122,7 @@ impl PathIntegrator {
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
                 if let Some((ds, em_weight)) = scene.sample_emitter_direction::<R>(&si, u_light) {
                     let wo = si.to_local(V3::cst(ds.d)).val();
-                    let f = bsdf.eval(store, &si, wo);
+                    let f = bsdf.eval(store, &si, V3::cst(wo));
                     if !f.is_zero() {
                         let w = if ds.delta {
                             1.0
@@ -144,7 +144,7 @@ impl PathIntegrator {
             throughput = sink.next_throughput(throughput, bs.weight);
             sink.end_vertex(Some(bs.weight));
             eta *= bs.eta;
-            let d = si.to_world(V3::cst(bs.wo)).val().normalize();
+            let d = si.to_world(V3::cst(bs.wo.val())).val().normalize();
             ray = si.spawn_ray(d);
             prev_p = si.p.val();
             prev_pdf = bs.pdf;
