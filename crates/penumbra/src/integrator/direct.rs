@@ -6,10 +6,10 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
-use crate::sensor::CameraSample;
 use crate::math::{Spectrum, V3};
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// Direct lighting: `emitter_samples` emitter samples and `bsdf_samples`
 /// BSDF samples per hit, combined with the power heuristic.

@@ -13,10 +13,10 @@ pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
 use crate::error::Result;
-use crate::sensor::CameraSample;
 use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// All integrator plugins.
 #[derive(Clone, Debug)]

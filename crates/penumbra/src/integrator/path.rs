@@ -8,10 +8,10 @@ use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::geometry::Ray;
-use crate::sensor::CameraSample;
 use crate::math::{Spectrum, V3};
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// Path tracer settings.
 #[derive(Clone, Debug)]
