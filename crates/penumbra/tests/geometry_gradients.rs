@@ -49,7 +49,9 @@ fn scene_xml(integrator: &str, sensor: &str, body: &str) -> String {
 }
 
 fn path_integrator(max_depth: u32) -> String {
-    format!(r#"<integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>"#)
+    format!(
+        r#"<integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>"#
+    )
 }
 
 /// A 20 × 20 textured diffuse plane at z = 0 (id `plane`), normal +z.
@@ -113,7 +115,12 @@ fn rotation(positions: &[f32], w: [f32; 3], c: [f32; 3]) -> Vec<f32> {
 
 /// Forward-mode derivative image and the central difference with step
 /// `eps` along `tangent`, same seed.
-fn derivative_and_fd(scene: &mut Scene, key: &str, tangent: &[f32], eps: f32) -> (Vec<f32>, Vec<f32>) {
+fn derivative_and_fd(
+    scene: &mut Scene,
+    key: &str,
+    tangent: &[f32],
+    eps: f32,
+) -> (Vec<f32>, Vec<f32>) {
     let o = opts();
     let fwd = render_forward(scene, &[(key, tangent)], &o).unwrap().data;
     let id = scene.params.require(key).unwrap();
@@ -174,15 +181,31 @@ fn check(name: &str, xml: &str, key: &str, tangent: impl Fn(&[f32]) -> Vec<f32>,
 }
 
 fn area_light_scene(radiance: &str) -> String {
-    scene_xml(&path_integrator(3), &oblique_sensor(), &format!("{PLANE}{}", light(radiance)))
+    scene_xml(
+        &path_integrator(3),
+        &oblique_sensor(),
+        &format!("{PLANE}{}", light(radiance)),
+    )
 }
 
 #[test]
 fn plane_translated_under_an_area_light() {
     let xml = area_light_scene(CONSTANT_RADIANCE);
     let key = "plane.vertex_positions";
-    check("plane ⟂ (area light)", &xml, key, |p| translation(p.len(), [0.0, 0.0, 1.0]), 1e-3);
-    check("plane ∥ (area light)", &xml, key, |p| translation(p.len(), [1.0, 0.5, 0.0]), 1e-3);
+    check(
+        "plane ⟂ (area light)",
+        &xml,
+        key,
+        |p| translation(p.len(), [0.0, 0.0, 1.0]),
+        1e-3,
+    );
+    check(
+        "plane ∥ (area light)",
+        &xml,
+        key,
+        |p| translation(p.len(), [1.0, 0.5, 0.0]),
+        1e-3,
+    );
 }
 
 #[test]
@@ -195,21 +218,39 @@ fn plane_translated_under_an_environment_map() {
         ),
     );
     let key = "plane.vertex_positions";
-    check("plane ⟂ (envmap)", &xml, key, |p| translation(p.len(), [0.0, 0.0, 1.0]), 1e-3);
+    check(
+        "plane ⟂ (envmap)",
+        &xml,
+        key,
+        |p| translation(p.len(), [0.0, 0.0, 1.0]),
+        1e-3,
+    );
 }
 
 #[test]
 fn plane_translated_under_a_textured_area_emitter() {
     let xml = area_light_scene(TEXTURED_RADIANCE);
     let key = "plane.vertex_positions";
-    check("plane ⟂ (textured light)", &xml, key, |p| translation(p.len(), [0.0, 0.0, 1.0]), 1e-3);
+    check(
+        "plane ⟂ (textured light)",
+        &xml,
+        key,
+        |p| translation(p.len(), [0.0, 0.0, 1.0]),
+        1e-3,
+    );
 }
 
 #[test]
 fn textured_area_emitter_translated_and_rotated() {
     let xml = area_light_scene(TEXTURED_RADIANCE);
     let key = "light.vertex_positions";
-    check("light moved", &xml, key, |p| translation(p.len(), [0.5, 1.0, 0.5]), 1e-3);
+    check(
+        "light moved",
+        &xml,
+        key,
+        |p| translation(p.len(), [0.5, 1.0, 0.5]),
+        1e-3,
+    );
     check(
         "light rotated",
         &xml,
@@ -291,13 +332,23 @@ fn inside_sphere_xml() -> String {
             <point name="position" value="0.5, 0.5, 1"/>
             <rgb name="intensity" value="30"/>
         </emitter>"#;
-    scene_xml(&path_integrator(3), &sensor_xml("0, -1, 1", 40.0, SIZE, SPP, Some("box")), body)
+    scene_xml(
+        &path_integrator(3),
+        &sensor_xml("0, -1, 1", 40.0, SIZE, SPP, Some("box")),
+        body,
+    )
 }
 
 #[test]
 fn sphere_centre_and_radius() {
     let xml = inside_sphere_xml();
-    check("sphere centre", &xml, "ball.center", |_| vec![1.0, 0.5, -0.5], 1e-3);
+    check(
+        "sphere centre",
+        &xml,
+        "ball.center",
+        |_| vec![1.0, 0.5, -0.5],
+        1e-3,
+    );
     check("sphere radius", &xml, "ball.radius", |_| vec![1.0], 1e-3);
 }
 
@@ -347,7 +398,11 @@ fn assert_forward_matches_reverse(name: &str, xml: &str, key: &str) {
     let grads = render_backward(&mut scene, &adjoint, Some(&[key]), &o).unwrap();
     let g = grads.get(key).unwrap();
     let rhs: f64 = g.iter().zip(&v).map(|(a, b)| (a * b) as f64).sum();
-    let scale: f64 = fwd.iter().zip(&adjoint).map(|(a, b)| (a * b).abs() as f64).sum();
+    let scale: f64 = fwd
+        .iter()
+        .zip(&adjoint)
+        .map(|(a, b)| (a * b).abs() as f64)
+        .sum();
     eprintln!("{name}: forward {lhs:.6}, reverse {rhs:.6} (scale {scale:.4})");
     assert!(scale > 1e-3, "{name}: no derivative at all");
     assert!(

@@ -6,7 +6,7 @@ use super::{
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::Spectrum;
+use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamStore};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
@@ -65,7 +65,7 @@ impl BsdfT for BlendBsdf {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let w = self.w(store, si);
         self.bsdfs[0].eval(store, si, wo) * (-w + 1.0) + self.bsdfs[1].eval(store, si, wo) * w
@@ -104,7 +104,7 @@ impl BsdfT for BlendBsdf {
         if bs.lobe.has(BsdfFlags::DELTA) {
             Some(chosen_with(bs, prob, prob_r))
         } else {
-            smooth_sample(self, store, si, bs.wo, bs.eta, bs.lobe)
+            smooth_sample(self, store, si, bs.wo.val(), bs.eta, bs.lobe)
         }
     }
 
@@ -119,6 +119,7 @@ mod tests {
     use super::super::test_util::*;
     use super::super::{Bsdf, BsdfFlags, BsdfT};
     use crate::ad::Dual;
+    use crate::math::V3;
     use crate::scene::LoadContext;
 
     #[test]
@@ -149,13 +150,14 @@ mod tests {
         let wi = dir(0.7, 0.0);
         let wo = dir(0.6, 3.0);
         let s = si::<f32>(wi);
-        let want = bb.bsdfs[0].eval(&store, &s, wo).val() * 0.7
-            + bb.bsdfs[1].eval(&store, &s, wo).val() * 0.3;
+        let want = bb.bsdfs[0].eval(&store, &s, V3::cst(wo)).val() * 0.7
+            + bb.bsdfs[1].eval(&store, &s, V3::cst(wo)).val() * 0.3;
         assert!((eval_f32(&b, &store, wi, wo) - want).abs().max_element() < 1e-6);
         check_smooth(&b, &store, &[wi, dir(0.2, 1.0)], 1);
         store.set_tangent("bl.weight.value", &[1.0]).unwrap();
-        let d = b.eval(&store, &si::<Dual>(wi), wo);
-        let diff = bb.bsdfs[1].eval(&store, &s, wo).val() - bb.bsdfs[0].eval(&store, &s, wo).val();
+        let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
+        let diff = bb.bsdfs[1].eval(&store, &s, V3::cst(wo)).val()
+            - bb.bsdfs[0].eval(&store, &s, V3::cst(wo)).val();
         assert!((d.x.d - diff.x).abs() < 1e-5);
 
         // blend with a delta lobe: its samples carry the component weight

@@ -111,7 +111,7 @@ impl BsdfT for Conductor {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DELTA_REFLECTION
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
     fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
@@ -129,7 +129,7 @@ impl BsdfT for Conductor {
         }
         let f = self.ior.fresnel(store, si, si.wi.z);
         let weight = f.mul_elem(self.specular_reflectance.eval(store, si));
-        Some(BsdfSample::specular_reflection(si.wi.val(), 1.0, weight))
+        Some(BsdfSample::specular_reflection(si.wi, 1.0, weight))
     }
     fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
@@ -145,6 +145,7 @@ mod tests {
     #[test]
     fn mirror_by_default_and_named_materials() {
         let (b, store) = build("conductor", &[]);
+        check_direction_derivatives(&b, &store, 3);
         for k in ["b.eta.value", "b.k.value", "b.specular_reflectance.value"] {
             assert!(store.id(k).is_some(), "{k}");
         }
@@ -152,9 +153,9 @@ mod tests {
         let bs = b
             .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5))
             .unwrap();
-        assert!((bs.wo - glam::Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
+        assert!((bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
         assert!((bs.weight.val() - glam::Vec3::ONE).abs().max_element() < 1e-6);
-        assert!(eval_f32(&b, &store, wi, bs.wo) == glam::Vec3::ZERO);
+        assert!(eval_f32(&b, &store, wi, bs.wo.val()) == glam::Vec3::ZERO);
         assert!(b
             .sample(&store, &si::<f32>(-wi), 0.5, glam::Vec2::splat(0.5))
             .is_none());
@@ -166,6 +167,7 @@ mod tests {
                 ("specular_reflectance", float(0.5)),
             ],
         );
+        check_direction_derivatives(&b, &store, 3);
         let bs = b
             .sample(&store, &si::<f32>(wi), 0.1, glam::Vec2::ZERO)
             .unwrap();

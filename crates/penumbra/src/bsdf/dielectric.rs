@@ -1,7 +1,7 @@
 //! `dielectric`: a smooth interface between two dielectrics (glass,
 //! water): delta reflection and refraction weighted by the Fresnel terms.
 
-use super::fresnel::fresnel_dielectric;
+use super::fresnel::{fresnel_dielectric, refract};
 use super::{
     default_albedo, eta_props, sample_reflect_or_transmit, scalar_param, specular_factors,
     BsdfFlags, BsdfSample, BsdfT,
@@ -49,7 +49,7 @@ impl BsdfT for Dielectric {
             .union(BsdfFlags::DELTA_TRANSMISSION)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
     fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
@@ -62,14 +62,12 @@ impl BsdfT for Dielectric {
         u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        let wi = si.wi.val();
-        if wi.z == 0.0 {
+        if si.wi.z.val() == 0.0 {
             return None;
         }
         let eta = store.read::<R>(self.eta, 0);
         let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
-        let eti = eta_ti.val();
-        let wo = Vec3::new(-eti * wi.x, -eti * wi.y, cos_t.val());
+        let wo = refract(si.wi, V3::cst(Vec3::Z), cos_t, eta_ti);
         // radiance is scaled by η_ti² crossing the interface
         let value = (-f + 1.0) * eta_ti * eta_ti;
         sample_reflect_or_transmit(
@@ -101,6 +99,7 @@ mod tests {
             "dielectric",
             &[("int_ior", string("water")), ("ext_ior", string("air"))],
         );
+        check_direction_derivatives(&b, &store, 3);
         let eta = 1.3330f32 / 1.000277;
         assert!((store.data(store.id("b.eta").unwrap())[0] - eta).abs() < 1e-6);
         for wi in [
@@ -118,7 +117,7 @@ mod tests {
                 let bs = b.sample(&store, &s, rng.next_f32(), Vec2::ZERO).unwrap();
                 if bs.lobe == BsdfFlags::DELTA_REFLECTION {
                     nr += 1;
-                    assert!((bs.wo - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
+                    assert!((bs.wo.val() - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
                     assert!((bs.weight.x - 1.0).abs() < 1e-5 && (bs.pdf - f).abs() < 1e-6);
                 } else {
                     assert_eq!(bs.lobe, BsdfFlags::DELTA_TRANSMISSION);
@@ -159,6 +158,7 @@ mod tests {
                 ("specular_transmittance", rgb(0.5, 0.5, 0.5)),
             ],
         );
+        check_direction_derivatives(&b, &store, 3);
         assert!(store.id("b.specular_transmittance.value").is_some());
         assert!(store.id("b.specular_reflectance.value").is_none());
         let bs = b

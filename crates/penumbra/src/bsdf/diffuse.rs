@@ -42,12 +42,12 @@ impl BsdfT for Diffuse {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
-        if !(si.wi.z.val() > 0.0 && wo.z > 0.0) {
+        if !(si.wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
-        self.reflectance.eval(store, si).scale(wo.z * FRAC_1_PI)
+        self.reflectance.eval(store, si) * (wo.z * FRAC_1_PI)
     }
 
     fn pdf<R: Real>(&self, _store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
@@ -73,7 +73,7 @@ impl BsdfT for Diffuse {
             return None;
         }
         Some(BsdfSample {
-            wo,
+            wo: V3::cst(wo),
             pdf,
             // f cos / pdf = reflectance exactly (cos/π cancels)
             weight: self.reflectance.eval(store, si),

@@ -87,15 +87,16 @@ pub fn fresnel_diffuse_reflectance<R: Real>(eta: R) -> R {
 /// Refraction of `wi` (pointing away from the surface) through the
 /// interface with normal `m`, given the signed cosine `cos_theta_t` and
 /// `eta_ti` from [`fresnel_dielectric`] (evaluated at `dot(wi, m)`).
+/// Generic so that delta refraction moves with an attached `wi`.
 #[inline]
-pub fn refract(wi: Vec3, m: Vec3, cos_theta_t: f32, eta_ti: f32) -> Vec3 {
+pub fn refract<R: Real>(wi: V3<R>, m: V3<R>, cos_theta_t: R, eta_ti: R) -> V3<R> {
     m * (wi.dot(m) * eta_ti + cos_theta_t) - wi * eta_ti
 }
 
 /// Mirror reflection of `wi` about `m`.
 #[inline]
-pub fn reflect(wi: Vec3, m: Vec3) -> Vec3 {
-    m * (2.0 * wi.dot(m)) - wi
+pub fn reflect<R: Real>(wi: V3<R>, m: V3<R>) -> V3<R> {
+    m * (wi.dot(m) * 2.0) - wi
 }
 
 /// Indices of refraction by material name, as listed in Mitsuba 3's

@@ -56,7 +56,7 @@ impl BsdfT for Mask {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         self.nested.eval(store, si, wo) * self.o(store, si)
     }
@@ -77,7 +77,7 @@ impl BsdfT for Mask {
         if u1 >= o {
             let p = 1.0 - o;
             let weight = V3::splat((-o_r + 1.0) / p);
-            return Some(BsdfSample::pass_through(si.wi.val(), p, weight));
+            return Some(BsdfSample::pass_through(si.wi, p, weight));
         }
         let bs = self
             .nested
@@ -119,7 +119,7 @@ mod tests {
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::NULL);
         assert!(
-            (bs.wo + wi).length() < 1e-6
+            (bs.wo.val() + wi).length() < 1e-6
                 && (bs.pdf - 0.75).abs() < 1e-6
                 && (bs.weight.x - 1.0).abs() < 1e-6
         );

@@ -1,8 +1,13 @@
 //! The BSDF family. Conventions (as in Mitsuba 3): directions are in the
 //! local shading frame (normal = +z); `si.wi` points towards the viewer;
-//! `eval` includes the cosine foreshortening `|cos θo|`; sampling is
-//! detached (the sampled direction and its pdf are f32 constants) while the
-//! sample weight `eval / pdf` is differentiated in `R`.
+//! `eval` includes the cosine foreshortening `|cos θo|`. Values are
+//! differentiable in both directions (`si.wi` and `wo` are in `R`, so
+//! derivatives with respect to geometry flow through the shading frame).
+//! Sampling of smooth lobes is detached: the sampled direction is a
+//! constant of the integral and its pdf an f32, while the weight
+//! `eval / pdf` is differentiated in `R`. A delta lobe has no density to
+//! integrate against: its direction is a function of `si.wi`, computed in
+//! `R` like its weight.
 
 mod blendbsdf;
 mod conductor;
@@ -76,8 +81,9 @@ impl BsdfFlags {
 /// A sampled direction with its weight.
 #[derive(Clone, Copy, Debug)]
 pub struct BsdfSample<R> {
-    /// Sampled direction, local frame (a constant: detached sampling).
-    pub wo: Vec3,
+    /// Sampled direction, local frame: a constant for smooth lobes
+    /// (detached sampling), a function of `si.wi` for delta lobes.
+    pub wo: V3<R>,
     /// Solid-angle density of `wo` (for delta lobes: the discrete
     /// probability of choosing the lobe).
     pub pdf: f32,
@@ -93,9 +99,9 @@ pub struct BsdfSample<R> {
 impl<R: Real> BsdfSample<R> {
     /// A delta reflection about the normal (`wo` = `wi` mirrored, `eta`
     /// 1) chosen with probability `pdf`.
-    pub(crate) fn specular_reflection(wi: Vec3, pdf: f32, weight: Spectrum<R>) -> Self {
+    pub(crate) fn specular_reflection(wi: V3<R>, pdf: f32, weight: Spectrum<R>) -> Self {
         BsdfSample {
-            wo: Vec3::new(-wi.x, -wi.y, wi.z),
+            wo: V3::new(-wi.x, -wi.y, wi.z),
             pdf,
             weight,
             eta: 1.0,
@@ -105,7 +111,7 @@ impl<R: Real> BsdfSample<R> {
 
     /// An index-matched pass-through (`NULL` lobe: `wo = −wi`, `eta` 1)
     /// chosen with probability `pdf`.
-    pub(crate) fn pass_through(wi: Vec3, pdf: f32, weight: Spectrum<R>) -> Self {
+    pub(crate) fn pass_through(wi: V3<R>, pdf: f32, weight: Spectrum<R>) -> Self {
         BsdfSample {
             wo: -wi,
             pdf,
@@ -121,12 +127,13 @@ pub trait BsdfT {
     /// The lobes this BSDF has (may depend on textures, so it takes the
     /// store).
     fn flags(&self) -> BsdfFlags;
-    /// `f(wi, wo) · |cos θo|` for the smooth lobes (zero for delta lobes).
+    /// `f(wi, wo) · |cos θo|` for the smooth lobes (zero for delta lobes),
+    /// differentiable in `si.wi` and `wo` (local frame).
     fn eval<R: Real>(
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R>;
     /// Solid-angle density with which `sample` returns `wo` (smooth lobes).
     fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32;
@@ -204,7 +211,7 @@ impl BsdfT for Bsdf {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         dispatch!(self, b => b.eval(store, si, wo))
     }
@@ -455,6 +462,8 @@ fn rekey(node: &Node, key: &str) -> Node {
 /// The sample of a smooth lobe at the already chosen direction `wo`: its
 /// density is the BSDF's `pdf(wo)` (all lobes, as the lobe choice is
 /// random) and its weight `eval(wo) / pdf`; `None` where the density is 0.
+/// `wo` enters as a constant: a sampled direction is a variable of
+/// integration, not a function of the parameters.
 pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
     b: &B,
     store: &ParamStore,
@@ -467,6 +476,7 @@ pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
     if !(pdf > 0.0) {
         return None;
     }
+    let wo = V3::cst(wo);
     Some(BsdfSample {
         wo,
         pdf,
@@ -476,10 +486,11 @@ pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
     })
 }
 
-/// The transmitted half of [`sample_reflect_or_transmit`]: direction,
+/// The transmitted half of [`sample_reflect_or_transmit`]: direction (in
+/// `R`, a function of `si.wi`),
 /// R-valued transmitted value (`1 − F`, times any radiance scaling), the
 /// relative index along the path and the lobe.
-pub(crate) type Transmitted<R> = (Vec3, R, f32, BsdfFlags);
+pub(crate) type Transmitted<R> = (V3<R>, R, f32, BsdfFlags);
 
 /// Chooses between the delta reflection and the delta transmission of a
 /// smooth interface (`dielectric`, `thindielectric`) with the primal
@@ -500,7 +511,7 @@ pub(crate) fn sample_reflect_or_transmit<R: Real>(
     let t = 1.0 - r;
     if u1 < r {
         let w = modulate(V3::splat(f / r), specular_reflectance, store, si);
-        return Some(BsdfSample::specular_reflection(si.wi.val(), r, w));
+        return Some(BsdfSample::specular_reflection(si.wi, r, w));
     }
     if !(t > 0.0) {
         return None;
@@ -538,7 +549,8 @@ pub(crate) fn default_albedo<R: Real, B: BsdfT>(
     store: &ParamStore,
     si: &SurfaceInteraction<R>,
 ) -> Spectrum<R> {
-    b.eval(store, si, Vec3::Z).scale(std::f32::consts::PI)
+    b.eval(store, si, V3::cst(Vec3::Z))
+        .scale(std::f32::consts::PI)
 }
 
 #[cfg(test)]
@@ -564,11 +576,9 @@ mod tests {
         assert!(e.contains("unknown parameter 'reflectanse'"), "{e}");
     }
 
-    /// Every plugin gives bit-identical primal values in f32 and Dual
-    /// (eval, and sample weights / pdfs / directions).
-    #[test]
-    fn f32_and_dual_primals_are_identical() {
-        let plugins: Vec<(&str, Vec<(&str, Value)>)> = vec![
+    /// One configuration of every plugin.
+    fn all_plugins() -> Vec<(&'static str, Vec<(&'static str, Value)>)> {
+        vec![
             ("diffuse", vec![]),
             ("conductor", vec![("material", string("Cu"))]),
             (
@@ -594,7 +604,14 @@ mod tests {
                     ("c", nested("b", "c", "roughplastic", &[])),
                 ],
             ),
-        ];
+        ]
+    }
+
+    /// Every plugin gives bit-identical primal values in f32 and Dual
+    /// (eval, and sample weights / pdfs / directions).
+    #[test]
+    fn f32_and_dual_primals_are_identical() {
+        let plugins = all_plugins();
         let wis = [dir(0.8, 0.3), dir(0.3, 2.0), dir(-0.6, 1.0)];
         for (plugin, props) in &plugins {
             let (b, store) = build(plugin, props);
@@ -612,19 +629,31 @@ mod tests {
                         (None, None) => {}
                         (Some(a), Some(d)) => {
                             assert_eq!(
-                                (a.wo, a.pdf, a.lobe, a.eta),
-                                (d.wo, d.pdf, d.lobe, d.eta),
+                                (a.wo.val(), a.pdf, a.lobe, a.eta),
+                                (d.wo.val(), d.pdf, d.lobe, d.eta),
                                 "{plugin}"
                             );
                             assert_eq!(a.weight.val(), d.weight.val(), "{plugin}");
                             let fa = b.eval(&store, &sf, a.wo).val();
-                            let fd = b.eval(&store, &sd, a.wo).val();
+                            let fd = b.eval(&store, &sd, V3::cst(a.wo.val())).val();
                             assert_eq!(fa, fd, "{plugin}");
                         }
                         (a, d) => panic!("{plugin}: {a:?} vs {d:?}"),
                     }
                 }
             }
+        }
+    }
+
+    /// Every plugin is differentiable in `si.wi` and `wo`: eval, and the
+    /// directions and values of delta samples (the smooth plugins are also
+    /// checked in each of their own test configurations, by
+    /// `check_smooth`).
+    #[test]
+    fn direction_derivatives_match_finite_differences() {
+        for (plugin, props) in &all_plugins() {
+            let (b, store) = build(plugin, props);
+            check_direction_derivatives(&b, &store, 11);
         }
     }
 }

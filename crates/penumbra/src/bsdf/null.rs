@@ -24,7 +24,7 @@ impl BsdfT for Null {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::NULL.union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
     fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
@@ -37,11 +37,7 @@ impl BsdfT for Null {
         _u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        Some(BsdfSample::pass_through(
-            si.wi.val(),
-            1.0,
-            V3::splat(R::cst(1.0)),
-        ))
+        Some(BsdfSample::pass_through(si.wi, 1.0, V3::splat(R::cst(1.0))))
     }
     fn albedo<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
@@ -56,12 +52,13 @@ mod tests {
     #[test]
     fn passes_through() {
         let (b, store) = build("null", &[]);
+        check_direction_derivatives(&b, &store, 3);
         for wi in [dir(0.3, 1.0), dir(-0.8, 2.0)] {
             let bs = b
                 .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
                 .unwrap();
             assert_eq!(bs.lobe, BsdfFlags::NULL);
-            assert_eq!(bs.wo, -wi);
+            assert_eq!(bs.wo.val(), -wi);
             assert_eq!(bs.weight.val(), glam::Vec3::ONE);
             assert!(eval_f32(&b, &store, wi, -wi) == glam::Vec3::ZERO);
         }

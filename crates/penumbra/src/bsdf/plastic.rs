@@ -44,7 +44,7 @@ pub(crate) fn coated_diffuse<R: Real>(
     eta: R,
     t_i: R,
     t_o: R,
-    cos_o: f32,
+    cos_o: R,
 ) -> Spectrum<R> {
     let denom = if nonlinear {
         rho.map(|c| -(c * internal_reflectance) + 1.0)
@@ -130,15 +130,15 @@ impl BsdfT for Plastic {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let cos_i = si.wi.z;
-        if !(cos_i.val() > 0.0 && wo.z > 0.0) {
+        if !(cos_i.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
         let eta = store.read::<R>(self.eta, 0);
         let t_i = -fresnel_dielectric(cos_i, eta).0 + 1.0;
-        let t_o = -fresnel_dielectric(R::cst(wo.z), eta).0 + 1.0;
+        let t_o = -fresnel_dielectric(wo.z, eta).0 + 1.0;
         let f_int = fresnel_diffuse_reflectance(eta.recip());
         coated_diffuse(
             self.diffuse_reflectance.eval(store, si),
@@ -177,7 +177,7 @@ impl BsdfT for Plastic {
         let ps = specular_probability(f_i.val(), self.specular_sampling_weight);
         if u1 < ps {
             let w = modulate(V3::splat(f_i / ps), &self.specular_reflectance, store, si);
-            return Some(BsdfSample::specular_reflection(wi, ps, w));
+            return Some(BsdfSample::specular_reflection(si.wi, ps, w));
         }
         let wo = warp::square_to_cosine_hemisphere(u2);
         smooth_sample(self, store, si, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)

@@ -48,20 +48,19 @@ impl BsdfT for RoughConductor {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let wi = si.wi;
-        if !(wi.z.val() > 0.0 && wo.z > 0.0) {
+        if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
-        let wo_r = V3::cst(wo);
-        let m = (wi + wo_r).normalize();
+        let m = (wi + wo).normalize();
         let distr = self.roughness.distribution(store, si);
         let d = distr.eval(m);
         if d.val() == 0.0 {
             return V3::zero();
         }
-        let g = distr.g(wi, wo_r, m);
+        let g = distr.g(wi, wo, m);
         let f = self.ior.fresnel(store, si, wi.dot(m));
         modulate(
             f * (d * g / (wi.z * 4.0)),
@@ -98,11 +97,12 @@ impl BsdfT for RoughConductor {
         }
         let distr = self.roughness.distribution(store, &detach_si(si));
         let (m, pdf_m) = distr.sample(wi, u2);
-        let wo = reflect(wi, m);
+        let wo = reflect(V3::from(wi), V3::from(m)).val();
         if !(pdf_m > 0.0 && wo.z > 0.0 && wo.dot(m) > 0.0) {
             return None;
         }
         let pdf = pdf_m / (4.0 * wo.dot(m));
+        let wo = V3::cst(wo);
         let f = self.eval(store, si, wo);
         Some(BsdfSample {
             wo,
@@ -123,6 +123,7 @@ mod tests {
     use super::super::test_util::*;
     use super::super::BsdfT;
     use crate::ad::Dual;
+    use crate::math::V3;
     use crate::params::ParamStore;
     use glam::Vec3;
 
@@ -191,15 +192,15 @@ mod tests {
             store.set_tangent("b.alpha.value", &[1.0]).unwrap();
             let wi = dir(0.7, 0.2);
             for wo in [dir(0.6, 3.0), dir(0.8, 3.3), dir(0.3, 2.5)] {
-                let d = b.eval(&store, &si::<Dual>(wi), wo);
-                let f = b.eval(&store, &si::<f32>(wi), wo);
+                let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
+                let f = b.eval(&store, &si::<f32>(wi), V3::cst(wo));
                 assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z], "primal differs");
                 let h = 1e-3;
                 let mut s2 = store.clone();
                 s2.set("b.alpha.value", &[0.2 + h]).unwrap();
-                let fp = b.eval(&s2, &si::<f32>(wi), wo);
+                let fp = b.eval(&s2, &si::<f32>(wi), V3::cst(wo));
                 s2.set("b.alpha.value", &[0.2 - h]).unwrap();
-                let fm = b.eval(&s2, &si::<f32>(wi), wo);
+                let fm = b.eval(&s2, &si::<f32>(wi), V3::cst(wo));
                 let fd = (fp.y - fm.y) / (2.0 * h);
                 assert!(
                     (d.y.d - fd).abs() <= 0.01 * fd.abs() + 1e-3,
@@ -240,7 +241,7 @@ mod tests {
                 for j in 0..nphi {
                     let phi = (j as f32 + 0.5) / nphi as f32 * std::f32::consts::TAU;
                     let w = dir(z, phi);
-                    sum += (b.eval(store, &si::<f32>(wi), w).y * h(w)) as f64;
+                    sum += (b.eval(store, &si::<f32>(wi), V3::cst(w)).y * h(w)) as f64;
                 }
             }
             sum * std::f64::consts::TAU / (nz * nphi) as f64
@@ -262,16 +263,16 @@ mod tests {
             let Some(bs) = b.sample::<Dual>(&store, &si::<Dual>(wi), u1, u2) else {
                 continue;
             };
-            let hw = h(bs.wo) as f64;
+            let hw = h(bs.wo.val()) as f64;
             // detached: d(f)/dα / p, with the sample and p constant
             let d = bs.weight.y.d as f64 * hw;
             // mixed: d(f/p)/dα at the fixed sample, pdf differentiated
             let f = (bs.weight.y.v * bs.pdf) as f64;
             let df = bs.weight.y.d as f64 * bs.pdf as f64;
             s2.set("b.alpha.value", &[alpha + eps]).unwrap();
-            let pp = b.pdf(&s2, &si::<f32>(wi), bs.wo) as f64;
+            let pp = b.pdf(&s2, &si::<f32>(wi), bs.wo.val()) as f64;
             s2.set("b.alpha.value", &[alpha - eps]).unwrap();
-            let pm = b.pdf(&s2, &si::<f32>(wi), bs.wo) as f64;
+            let pm = b.pdf(&s2, &si::<f32>(wi), bs.wo.val()) as f64;
             let p = bs.pdf as f64;
             let dp = (pp - pm) / (2.0 * eps as f64);
             let m = (df * p - f * dp) / (p * p) * hw;

@@ -81,22 +81,21 @@ impl BsdfT for RoughDielectric {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let eta_p = store.read::<R>(self.eta, 0);
         let wi = si.wi;
         let cos_i = wi.z;
-        if cos_i.val() == 0.0 || wo.z == 0.0 {
+        if cos_i.val() == 0.0 || wo.z.val() == 0.0 {
             return V3::zero();
         }
-        let reflect = cos_i.val() * wo.z > 0.0;
+        let reflect = cos_i.val() * wo.z.val() > 0.0;
         let eta = if cos_i.val() > 0.0 {
             eta_p
         } else {
             eta_p.recip()
         };
-        let wo_r = V3::cst(wo);
-        let mut m = (wi + if reflect { wo_r } else { wo_r * eta }).normalize();
+        let mut m = (wi + if reflect { wo } else { wo * eta }).normalize();
         if m.z.val() < 0.0 {
             m = -m;
         }
@@ -105,14 +104,14 @@ impl BsdfT for RoughDielectric {
         if d.val() == 0.0 {
             return V3::zero();
         }
-        let g = distr.g(wi, wo_r, m);
+        let g = distr.g(wi, wo, m);
         let (f, ..) = fresnel_dielectric(wi.dot(m), eta_p);
         if reflect {
             let v = f * d * g / (cos_i.abs() * 4.0);
             modulate(V3::splat(v), &self.specular_reflectance, store, si)
         } else {
             let wim = wi.dot(m);
-            let wom = wo_r.dot(m);
+            let wom = wo.dot(m);
             let denom = wim + eta * wom;
             // η² of the Jacobian × 1/η² of radiance scaling = 1
             let v = ((-f + 1.0) * d * g * wim * wom / (cos_i * denom * denom)).abs();
@@ -166,11 +165,12 @@ impl BsdfT for RoughDielectric {
             return None;
         }
         let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.dot(m), eta_p);
+        let (wi_v, m_v) = (V3::from(wi), V3::from(m));
         let (wo, lobe, eta) = if u1 < f {
-            (reflect(wi, m), BsdfFlags::GLOSSY_REFLECTION, 1.0)
+            (reflect(wi_v, m_v).val(), BsdfFlags::GLOSSY_REFLECTION, 1.0)
         } else {
             (
-                refract(wi, m, cos_t, eta_ti),
+                refract(wi_v, m_v, cos_t, eta_ti).val(),
                 BsdfFlags::GLOSSY_TRANSMISSION,
                 eta_it,
             )
@@ -192,6 +192,7 @@ mod tests {
     use super::super::test_util::*;
     use super::super::BsdfT;
     use crate::ad::Dual;
+    use crate::math::V3;
     use crate::scene::Value;
 
     #[test]
@@ -283,8 +284,8 @@ mod tests {
         // f32 and Dual give identical primal values
         let wi = glam::Vec3::new(0.3, 0.1, 0.9).normalize();
         let wo = glam::Vec3::new(-0.2, -0.1, -0.95).normalize();
-        let a = b.eval(&store, &si::<f32>(wi), wo);
-        let d = b.eval(&store, &si::<Dual>(wi), wo);
+        let a = b.eval(&store, &si::<f32>(wi), V3::cst(wo));
+        let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
         assert_eq!(a.x, d.x.v);
     }
 }

@@ -98,13 +98,14 @@ impl RoughPlastic {
         MicrofacetDistribution::new(self.kind, a, a, self.sample_visible)
     }
 
-    /// Table lookup with linear interpolation in cos θ.
-    fn transmittance(&self, cos: f32) -> f32 {
+    /// Table lookup with linear interpolation in cos θ (differentiable in
+    /// `cos`: the slope of the interpolating segment).
+    fn transmittance<R: Real>(&self, cos: R) -> R {
         let t = &self.external_transmittance;
         let x = cos.clamp(0.0, 1.0) * (TABLE_RES - 1) as f32;
-        let i = (x as usize).min(TABLE_RES - 2);
+        let i = (x.val() as usize).min(TABLE_RES - 2);
         let w = x - i as f32;
-        t[i] * (1.0 - w) + t[i + 1] * w
+        (-w + 1.0) * t[i] + w * t[i + 1]
     }
 }
 
@@ -190,10 +191,11 @@ fn interface_albedo(
                 }
             };
             let (f, cos_t, _, eta_ti) = fresnel_dielectric(wi.dot(m), eta);
+            let (wi_v, m_v) = (V3::from(wi), V3::from(m));
             let (wo, value) = if transmit {
-                (refract(wi, m, cos_t, eta_ti), 1.0 - f)
+                (refract(wi_v, m_v, cos_t, eta_ti).val(), 1.0 - f)
             } else {
-                (reflect(wi, m), f)
+                (reflect(wi_v, m_v).val(), f)
             };
             let valid = if transmit {
                 wo.z * wi.z < 0.0
@@ -244,27 +246,26 @@ impl BsdfT for RoughPlastic {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let wi = si.wi;
-        if !(wi.z.val() > 0.0 && wo.z > 0.0) {
+        if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
         let eta = store.read::<R>(self.eta, 0);
-        let wo_r = V3::cst(wo);
         // specular: rough dielectric reflection
         let distr = self.distr::<R>(store);
-        let m = (wi + wo_r).normalize();
+        let m = (wi + wo).normalize();
         let d = distr.eval(m);
         let mut spec = if d.val() > 0.0 {
             let f = fresnel_dielectric(wi.dot(m), eta).0;
-            V3::splat(f * d * distr.g(wi, wo_r, m) / (wi.z * 4.0))
+            V3::splat(f * d * distr.g(wi, wo, m) / (wi.z * 4.0))
         } else {
             V3::zero()
         };
         spec = modulate(spec, &self.specular_reflectance, store, si);
-        let t_i = R::cst(self.transmittance(wi.z.val()));
-        let t_o = R::cst(self.transmittance(wo.z));
+        let t_i = self.transmittance(wi.z);
+        let t_o = self.transmittance(wo.z);
         let diff = coated_diffuse(
             self.diffuse_reflectance.eval(store, si),
             self.nonlinear,
@@ -309,7 +310,10 @@ impl BsdfT for RoughPlastic {
         let ps = specular_probability(1.0 - t_i, self.specular_sampling_weight);
         let (wo, lobe) = if u1 < ps {
             let (m, _) = self.distr::<f32>(store).sample(wi, u2);
-            (reflect(wi, m), BsdfFlags::GLOSSY_REFLECTION)
+            (
+                reflect(V3::from(wi), V3::from(m)).val(),
+                BsdfFlags::GLOSSY_REFLECTION,
+            )
         } else {
             (
                 warp::square_to_cosine_hemisphere(u2),
@@ -332,6 +336,7 @@ mod tests {
     use super::super::test_util::*;
     use super::*;
     use crate::ad::Dual;
+    use crate::math::V3;
     use crate::scene::Value;
 
     #[test]
@@ -395,7 +400,7 @@ mod tests {
                 (p - p_ref).abs() <= tp * p_ref + 1e-7,
                 "{dist} pdf {p} vs {p_ref}"
             );
-            let d = b.eval(&store, &si::<Dual>(wi), wo);
+            let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
             assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z]);
         }
     }

@@ -1,11 +1,13 @@
 //! Shared helpers of the BSDF tests: building plugins from properties,
 //! surface interactions with a given incident direction, the χ² and
-//! consistency checks of sampling, and Monte Carlo albedo estimates.
+//! consistency checks of sampling, Monte Carlo albedo estimates, and the
+//! check of derivatives with respect to the directions.
 
 use super::{Bsdf, BsdfFlags, BsdfT};
-use crate::ad::Real;
+use crate::ad::{Dual, Real};
 use crate::error::SrcLoc;
 use crate::geometry::SurfaceInteraction;
+use crate::math::warp::square_to_uniform_sphere;
 use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::ParamStore;
 use crate::scene::{Class, LoadContext, Node, Prop, Value};
@@ -86,7 +88,7 @@ pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
 }
 
 pub fn eval_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> Vec3 {
-    b.eval(store, &si::<f32>(wi), wo).val()
+    b.eval(store, &si::<f32>(wi), V3::cst(wo)).val()
 }
 
 pub fn pdf_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> f32 {
@@ -101,8 +103,9 @@ fn close(a: f32, b: f32, rel: f32) -> bool {
 /// against `pdf` (threshold 1e-3 divided by the number of χ² tests,
 /// `wis.len() × tests_in_fn`), ∫ pdf ≤ 1, and for sampled directions of
 /// smooth lobes `pdf(wo)` = the sample's pdf and `eval(wo) / pdf(wo)` =
-/// its weight.
+/// its weight. Also runs [`check_direction_derivatives`].
 pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usize) {
+    check_direction_derivatives(b, store, 7);
     let threshold = 1e-3 / (wis.len() * tests_in_fn) as f64;
     for (i, &wi) in wis.iter().enumerate() {
         let s = si::<f32>(wi);
@@ -125,7 +128,7 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
                 }
                 if checked < 2000 {
                     checked += 1;
-                    let p = b.pdf(store, &s, bs.wo);
+                    let p = b.pdf(store, &s, bs.wo.val());
                     assert!(
                         close(p, bs.pdf, 2e-3),
                         "wi {wi:?} wo {:?}: pdf {p} vs sample pdf {}",
@@ -142,7 +145,7 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
                         );
                     }
                 }
-                Some(bs.wo)
+                Some(bs.wo.val())
             },
             |wo| b.pdf(store, &s, wo),
         );
@@ -214,7 +217,7 @@ pub fn albedo_quadrature(
         for j in 0..2 * n {
             let phi = (j as f64 + 0.5) * dp;
             let wo = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
-            let mut f = b.eval(store, &s, wo).val();
+            let mut f = b.eval(store, &s, V3::cst(wo)).val();
             if wo.z * wi.z < 0.0 {
                 f *= trans_scale;
             }
@@ -277,5 +280,157 @@ pub fn check_sampling_and_albedo(
                 "{a} ± {se}"
             );
         }
+    }
+}
+
+/// Angle step of the finite differences (radians along a great circle).
+const FD_STEP: f32 = 1e-3;
+
+/// `|d − fd| ≤ FD_REL |fd| + FD_FLOOR |value|` per channel. The floor
+/// covers rounding: the f32 evaluations are accurate to a few ulps
+/// (relative error ≲ 1e-6 after normalisations and Fresnel terms), which a
+/// central difference with step h/2 = 5e-4 divides by 2·5e-4, i.e. noise ≲
+/// 1e-3 |value|; 5e-3 leaves a margin. The relative part covers the
+/// truncation error (h/2)² f‴/6, ≲ 1e-4 |fd| for lobes no narrower than
+/// α = 0.1 (f varies on the scale α, so f‴ ~ f′/α²), with a wide margin.
+/// A detached direction changes the derivative by O(|value|) (the
+/// derivative of a cosine, or of D, along a unit tangent), far above both.
+const FD_REL: f32 = 2e-2;
+const FD_FLOOR: f32 = 5e-3;
+
+/// Directions closer to the horizon than this are skipped (cosines and
+/// Fresnel terms vary fastest there, and the side can switch within a step).
+const MIN_COS: f32 = 0.15;
+
+/// `w` turned by angle `h` towards the unit tangent `t ⊥ w`: a path on the
+/// unit sphere whose derivative at `h = 0` is `t`.
+fn turn(w: Vec3, t: Vec3, h: f32) -> Vec3 {
+    w * h.cos() + t * h.sin()
+}
+
+/// A uniformly random unit tangent of the unit vector `w`.
+fn random_tangent(rng: &mut Pcg32, w: Vec3) -> Vec3 {
+    loop {
+        let r = square_to_uniform_sphere(rng.next_2d());
+        let t = r - w * w.dot(r);
+        if t.length() > 0.1 {
+            return t.normalize();
+        }
+    }
+}
+
+/// The direction `w` carrying the tangent `t` (forward mode).
+fn dual_dir(w: Vec3, t: Vec3) -> V3<Dual> {
+    V3::new(
+        Dual::new(w.x, t.x),
+        Dual::new(w.y, t.y),
+        Dual::new(w.z, t.z),
+    )
+}
+
+/// The tangent part of a forward-mode vector.
+fn tangent_of(v: V3<Dual>) -> Vec3 {
+    Vec3::new(v.x.d, v.y.d, v.z.d)
+}
+
+/// The central difference of `f` along `h` with step `FD_STEP / 2`, or
+/// `None` where `f` is not smooth on [−FD_STEP, FD_STEP]: a branch switch
+/// (`f` returns `None`, e.g. another lobe was chosen), a change of support
+/// (a channel becomes zero), or a kink / singularity (the differences with
+/// steps `FD_STEP` and `FD_STEP / 2` disagree by more than half the
+/// tolerance; for a smooth `f` they differ by ~(3/4) h² f‴/6).
+fn central_difference(f: impl Fn(f32) -> Option<Vec3>) -> Option<Vec3> {
+    let h = FD_STEP;
+    let v: Vec<Vec3> = [-h, -h / 2.0, 0.0, h / 2.0, h]
+        .iter()
+        .map(|&x| f(x))
+        .collect::<Option<_>>()?;
+    let zero = v[2].cmpeq(Vec3::ZERO);
+    if v.iter().any(|w| w.cmpeq(Vec3::ZERO) != zero) {
+        return None;
+    }
+    let fd_h = (v[4] - v[0]) / (2.0 * h);
+    let fd = (v[3] - v[1]) / h;
+    let tol = fd.abs() * FD_REL + v[2].abs() * FD_FLOOR;
+    (fd_h - fd).abs().cmple(tol * 0.5).all().then_some(fd)
+}
+
+/// Asserts that the forward-mode derivative `d` matches the finite
+/// difference `fd` of a quantity of value `value` (see [`FD_REL`]).
+fn assert_derivative(d: Vec3, fd: Vec3, value: Vec3, what: &dyn Fn() -> String) {
+    let tol = fd.abs() * FD_REL + value.abs() * FD_FLOOR;
+    assert!(
+        (d - fd).abs().cmple(tol).all(),
+        "{}: derivative {d} vs finite difference {fd} (value {value})",
+        what()
+    );
+}
+
+/// Checks that `b` is differentiable in the directions (fixed seed): for
+/// random `wi`, `wo` and unit tangents, the `Dual` derivative of `eval`
+/// along a tangent of `si.wi` and along one of `wo` matches the central
+/// difference of the f32 `eval` along the great circles they span; and
+/// for samples of delta lobes, the derivatives of the sampled `wo` and of
+/// the lobe's value `weight · pdf` (the weight divides by the primal,
+/// detached pdf) along a tangent of `wi` match the differences of f32
+/// `sample` calls with the same `u1`, `u2`. Samples of smooth lobes must
+/// have constant directions. Points where a difference straddles a branch
+/// or a kink are skipped (see [`central_difference`]); enough must remain.
+pub fn check_direction_derivatives(b: &Bsdf, store: &ParamStore, seed: u64) {
+    let mut rng = Pcg32::new(seed);
+    let trials = 64;
+    let (mut evals, mut deltas) = (0, 0);
+    let with_wi = |wi: V3<Dual>| {
+        let mut s = si::<Dual>(Vec3::Z);
+        s.wi = wi;
+        s
+    };
+    for k in 0..trials {
+        let wi = square_to_uniform_sphere(rng.next_2d());
+        let wo = square_to_uniform_sphere(rng.next_2d());
+        let (ti, to) = (random_tangent(&mut rng, wi), random_tangent(&mut rng, wo));
+        let (u1, u2) = (rng.next_f32(), rng.next_2d());
+        if wi.z.abs() < MIN_COS {
+            continue;
+        }
+        let what = |d: &'static str| move || format!("{b:?} #{k} wi {wi} wo {wo}: {d}");
+        if wo.z.abs() >= MIN_COS {
+            let value = eval_f32(b, store, wi, wo);
+            let d_wi = b.eval(store, &with_wi(dual_dir(wi, ti)), V3::cst(wo));
+            let d_wo = b.eval(store, &si::<Dual>(wi), dual_dir(wo, to));
+            let fd_wi = central_difference(|h| Some(eval_f32(b, store, turn(wi, ti, h), wo)));
+            let fd_wo = central_difference(|h| Some(eval_f32(b, store, wi, turn(wo, to, h))));
+            if let (Some(fd_wi), Some(fd_wo)) = (fd_wi, fd_wo) {
+                evals += 1;
+                assert_derivative(tangent_of(d_wi), fd_wi, value, &what("eval along wi"));
+                assert_derivative(tangent_of(d_wo), fd_wo, value, &what("eval along wo"));
+            }
+        }
+        let Some(bs) = b.sample(store, &with_wi(dual_dir(wi, ti)), u1, u2) else {
+            continue;
+        };
+        if !bs.lobe.has(BsdfFlags::DELTA) {
+            assert_eq!(tangent_of(bs.wo), Vec3::ZERO, "{}", what("smooth sample")());
+            continue;
+        }
+        let sample_at = |h: f32| {
+            let s = b.sample(store, &si::<f32>(turn(wi, ti, h)), u1, u2)?;
+            (s.lobe == bs.lobe).then_some(s)
+        };
+        let fd_wo = central_difference(|h| sample_at(h).map(|s| s.wo.val()));
+        let fd_value = central_difference(|h| sample_at(h).map(|s| s.weight.val() * s.pdf));
+        if let (Some(fd_wo), Some(fd_value)) = (fd_wo, fd_value) {
+            deltas += 1;
+            let (wo_s, value) = (bs.wo.val(), bs.weight.val() * bs.pdf);
+            let d_value = tangent_of(bs.weight) * bs.pdf;
+            assert_derivative(tangent_of(bs.wo), fd_wo, wo_s, &what("delta wo"));
+            assert_derivative(d_value, fd_value, value, &what("delta weight · pdf"));
+        }
+    }
+    if b.flags().has(BsdfFlags::SMOOTH) {
+        assert!(evals >= trials / 4, "{b:?}: only {evals} evals checked");
+    }
+    if b.flags().has(BsdfFlags::DELTA) {
+        assert!(deltas > 0, "{b:?}: no delta sample checked");
     }
 }

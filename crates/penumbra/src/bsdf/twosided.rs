@@ -27,8 +27,8 @@ fn flip<R: Real>(si: &SurfaceInteraction<R>) -> SurfaceInteraction<R> {
     s
 }
 
-fn flip_v(v: Vec3) -> Vec3 {
-    Vec3::new(v.x, v.y, -v.z)
+fn flip_v<R: Real>(v: V3<R>) -> V3<R> {
+    V3::new(v.x, v.y, -v.z)
 }
 
 impl TwoSided {
@@ -68,7 +68,7 @@ impl BsdfT for TwoSided {
         &self,
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
-        wo: Vec3,
+        wo: V3<R>,
     ) -> Spectrum<R> {
         let z = si.wi.z.val();
         if z > 0.0 {
@@ -85,7 +85,7 @@ impl BsdfT for TwoSided {
         if z > 0.0 {
             self.front.pdf(store, si, wo)
         } else if z < 0.0 {
-            self.back.pdf(store, &flip(si), flip_v(wo))
+            self.back.pdf(store, &flip(si), flip_v(V3::from(wo)).val())
         } else {
             0.0
         }
@@ -172,7 +172,7 @@ mod tests {
             .sample(&ctx.store, &si::<f32>(wi_b), 0.3, glam::Vec2::splat(0.3))
             .unwrap();
         assert!(
-            (bs.wo - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6,
+            (bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6,
             "{bs:?}"
         );
 

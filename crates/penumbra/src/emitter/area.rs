@@ -156,11 +156,11 @@ impl EmitterT for Area {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
+    use crate::emitter::EmitterSample;
     use crate::emitter::{surface_si, Emitter};
+    use crate::math::V3;
     use crate::scene::Value;
     use crate::testing::Chi2Test;
 
@@ -226,7 +226,8 @@ mod tests {
         let r = test.run(
             |rng| {
                 let ps = sample_rect(rng.next_2d());
-                let EmitterSample { ds, weight: w, .. } = a.sample_from_position::<f32>(s, &ps, ps_si(&ps), V3::cst(ref_p))?;
+                let EmitterSample { ds, weight: w, .. } =
+                    a.sample_from_position::<f32>(s, &ps, ps_si(&ps), V3::cst(ref_p))?;
                 let pdf = Area::pdf_from_area(1.0 / AREA, ref_p, ds.d, ds.p, ds.n);
                 assert!((pdf - ds.pdf).abs() <= 1e-4 * pdf);
                 assert!(!ds.delta && (ds.dist - (ds.p - ref_p).length()).abs() < 1e-5);

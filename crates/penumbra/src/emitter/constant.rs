@@ -1,7 +1,8 @@
 //! Mitsuba's `constant` emitter: the same radiance from every direction.
 
 use super::{
-    emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterSample, EmitterT,
+    emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterSample,
+    EmitterT,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -81,11 +82,11 @@ impl EmitterT for Constant {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
     use crate::emitter::Emitter;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::scene::Value;
     use crate::testing::Chi2Test;
     use std::f32::consts::PI;
@@ -107,7 +108,8 @@ mod tests {
         let ref_p = Vec3::new(0.3, -0.2, 0.1);
         let r = Chi2Test::default().run(
             |rng| {
-                let EmitterSample { ds, weight: w, .. } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
+                let EmitterSample { ds, weight: w, .. } =
+                    e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
                 assert!((ds.pdf - 1.0 / (4.0 * PI)).abs() < 1e-7);
                 assert!(!ds.delta && ds.dist.is_infinite());
                 // weight = radiance / pdf, and pdf_direction agrees

@@ -70,10 +70,10 @@ impl EmitterT for Directional {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::scene::Value;
 
     #[test]

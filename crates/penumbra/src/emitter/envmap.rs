@@ -259,11 +259,11 @@ impl EmitterT for Envmap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::{node, CHI2_ALPHA};
     use crate::emitter::Emitter;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::scene::Value;
     use crate::testing::Chi2Test;
     use glam::{Mat4, Vec4};
@@ -360,7 +360,9 @@ mod tests {
         let mut mismatches = 0usize;
         let r = test.run(
             |rng| {
-                let EmitterSample { ds, weight: wgt, .. } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
+                let EmitterSample {
+                    ds, weight: wgt, ..
+                } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
                 let pdf = e.pdf_direction(s, &[], ref_p, ds.d, ds.p, ds.n);
                 let want = e.eval_environment::<f32>(s, ds.d).val() / pdf;
                 // f32 round-off in the direction (~1e-6) moves u by
@@ -405,7 +407,9 @@ mod tests {
         let mut rng = crate::testing::Pcg32::new(3);
         let mut n_ok = 0;
         for _ in 0..2000 {
-            let Some(EmitterSample { ds, weight: w, .. }) = e.sample_direction::<f32>(s, &[], V3::cst(Vec3::ZERO), rng.next_2d()) else {
+            let Some(EmitterSample { ds, weight: w, .. }) =
+                e.sample_direction::<f32>(s, &[], V3::cst(Vec3::ZERO), rng.next_2d())
+            else {
                 continue;
             };
             n_ok += 1;

@@ -56,11 +56,11 @@ impl EmitterT for Point {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::ad::Dual;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::scene::Value;
 
     #[test]

@@ -97,10 +97,10 @@ impl EmitterT for Spot {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emitter::EmitterSample;
-    use crate::math::V3;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
+    use crate::emitter::EmitterSample;
+    use crate::math::V3;
     use crate::scene::Value;
 
     /// Mitsuba 3.9.1's weights for a unit-intensity spot (cutoff 20°,
@@ -166,10 +166,20 @@ mod tests {
         let mut ctx = LoadContext::default();
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         assert!(e
-            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::new(0.0, 0.0, 0.0)), Vec2::ZERO)
+            .sample_direction::<f32>(
+                &ctx.store,
+                &[],
+                V3::cst(Vec3::new(0.0, 0.0, 0.0)),
+                Vec2::ZERO
+            )
             .is_some());
         assert!(e
-            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::new(0.0, 0.0, 10.0)), Vec2::ZERO)
+            .sample_direction::<f32>(
+                &ctx.store,
+                &[],
+                V3::cst(Vec3::new(0.0, 0.0, 10.0)),
+                Vec2::ZERO
+            )
             .is_none());
     }
 }

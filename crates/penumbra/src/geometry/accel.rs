@@ -874,7 +874,11 @@ mod tests {
                         );
                     }
                     // barycentrics reproduce the hit point
-                    let si = shapes[h.shape as usize].surface_interaction::<f32>(store, &crate::geometry::DiffRay::cst(&ray), &h);
+                    let si = shapes[h.shape as usize].surface_interaction::<f32>(
+                        store,
+                        &crate::geometry::DiffRay::cst(&ray),
+                        &h,
+                    );
                     assert!((si.p.val() - ray.at(h.t)).length() < 1e-3, "ray {i}");
                     assert!((si.t - h.t).abs() < 1e-3 * (1.0 + h.t), "ray {i}");
                     if let Shape::Mesh(m) = &shapes[h.shape as usize] {

@@ -610,8 +610,8 @@ pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{DiffRay, Ray};
     use crate::ad::Dual;
+    use crate::geometry::{DiffRay, Ray};
 
     fn tet() -> MeshData {
         MeshData {

@@ -184,9 +184,9 @@ impl ShapeT for Shape {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{DiffRay, Ray};
     use crate::ad::Dual;
     use crate::error::SrcLoc;
+    use crate::geometry::{DiffRay, Ray};
     use crate::math::Transform;
     use crate::scene::{Class, Prop, Value};
     use glam::{Mat4, Vec3};
@@ -353,7 +353,11 @@ mod tests {
         )
         .unwrap();
         let r3 = Ray::new(Vec3::new(0.0, 0.0, 4.0), -Vec3::Z);
-        let si3 = s.surface_interaction::<f32>(&ctx.store, &DiffRay::cst(&r3), &hit_of(&s, &ctx.store, &r3));
+        let si3 = s.surface_interaction::<f32>(
+            &ctx.store,
+            &DiffRay::cst(&r3),
+            &hit_of(&s, &ctx.store, &r3),
+        );
         assert!((si3.n.val() + Vec3::Z).length() < 1e-6);
         let ps = s.sample_position(&ctx.store, Vec2::new(0.3, 0.8));
         assert!((ps.p.length() - 1.0).abs() < 1e-5 && (ps.n + ps.p).length() < 1e-5);

@@ -6,9 +6,9 @@ use super::Integrator;
 use crate::bsdf::BsdfT;
 use crate::error::Result;
 use crate::geometry::DiffRay;
-use crate::sensor::CameraSample;
 use crate::sampler::SampleStream;
 use crate::scene::{Class, Node, Scene};
+use crate::sensor::CameraSample;
 
 /// One output variable.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -6,10 +6,10 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
-use crate::sensor::CameraSample;
 use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// Direct lighting: `emitter_samples` emitter samples and `bsdf_samples`
 /// BSDF samples per hit, combined with the power heuristic.
@@ -65,7 +65,7 @@ impl DirectIntegrator {
                 let u = rng.next_2d();
                 if let Some(es) = scene.sample_emitter_direction::<R>(&si, u) {
                     let wo = si.to_local(es.d);
-                    let f = bsdf.eval(store, &si, wo.val());
+                    let f = bsdf.eval(store, &si, wo);
                     let w = if es.ds.delta {
                         1.0 / ne
                     } else {

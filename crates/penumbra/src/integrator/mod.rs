@@ -12,14 +12,14 @@ pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
-use crate::error::Result;
 use crate::bsdf::{Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
-use crate::math::V3;
-use crate::sensor::CameraSample;
 use crate::math::Spectrum;
+use crate::math::V3;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// All integrator plugins.
 #[derive(Clone, Debug)]
@@ -133,7 +133,7 @@ pub(crate) fn scatter<R: Real>(
     bs: &BsdfSample<R>,
 ) -> Bounce<R> {
     let delta = bs.lobe.has(BsdfFlags::DELTA);
-    let d = si.to_world(V3::cst(bs.wo)).normalize();
+    let d = si.to_world(bs.wo).normalize();
     let ray = si.spawn_ray(d.val());
     let hit = scene.intersect(&ray);
     if delta || !R::DIFFERENTIABLE {
@@ -164,7 +164,7 @@ pub(crate) fn scatter<R: Real>(
         // towards the environment (at infinity): the direction is the constant
         None => (None, d, R::cst(1.0)),
     };
-    let f = bsdf.eval(&scene.params, si, si.to_local(wo).val());
+    let f = bsdf.eval(&scene.params, si, si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
     let attach = |w: R, f: R| {
         if f.val() != 0.0 {

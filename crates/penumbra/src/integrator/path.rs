@@ -7,10 +7,10 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
-use crate::sensor::CameraSample;
 use crate::math::Spectrum;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
+use crate::sensor::CameraSample;
 
 /// Path tracer settings.
 #[derive(Clone, Debug)]
@@ -111,7 +111,7 @@ impl PathIntegrator {
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
                 if let Some(es) = scene.sample_emitter_direction::<R>(&si, u_light) {
                     let wo = si.to_local(es.d);
-                    let f = bsdf.eval(store, &si, wo.val());
+                    let f = bsdf.eval(store, &si, wo);
                     if !f.is_zero() {
                         let w = if es.ds.delta {
                             1.0

@@ -163,8 +163,7 @@ impl Scene {
     ) -> Option<EmitterSample<R>> {
         let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
         let u = Vec2::new(ux, u.y);
-        let mut es =
-            self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, si.p, u)?;
+        let mut es = self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, si.p, u)?;
         if !(es.ds.pdf > 0.0) {
             return None;
         }
