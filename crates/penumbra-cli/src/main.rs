@@ -3,7 +3,8 @@
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use penumbra::diff::{
-    check_gradient, gradient_seed, render_backward, render_forward, CheckOptions, Estimate,
+    check_gradient, gradient_seed, perturbation_tangent, render_backward, render_forward,
+    translation_tangent, CheckOptions, Estimate,
 };
 use penumbra::image::plot::{median, trend};
 use penumbra::image::{write_exr, write_png, Image};
@@ -62,6 +63,19 @@ struct RunArgs {
 /// `--spp`: at least 1 (the scene's sampler decides when it is not given).
 fn spp_parser() -> clap::builder::RangedI64ValueParser<u32> {
     clap::value_parser!(u32).range(1..)
+}
+
+/// `--translate`: three comma-separated numbers.
+fn vec3_parser(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("'{s}': {e}; expected three numbers like 0,0,1"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!("'{s}': expected three finite numbers like 0,0,1")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -140,6 +154,16 @@ enum Command {
         /// Relative finite-difference step.
         #[arg(long, default_value_t = 1e-2)]
         eps: f32,
+        /// Differentiate along a translation "x,y,z" instead of θ·(1+s):
+        /// moves every point of vertex positions or a sphere's centre, or
+        /// the translation of a to_world (shapes, the sensor: camera
+        /// motion).
+        #[arg(long, value_parser = vec3_parser, conflicts_with = "perturb")]
+        translate: Option<[f32; 3]>,
+        /// Differentiate along a random perturbation of every element
+        /// (e.g. of every vertex), drawn from this seed.
+        #[arg(long)]
+        perturb: Option<u64>,
         /// Folder for the derivative images (EXR).
         #[arg(short, long, default_value = "out/check-grad")]
         output: PathBuf,
@@ -475,6 +499,8 @@ fn run(cli: Cli) -> Result<(), String> {
             spp,
             batches,
             eps,
+            translate,
+            perturb,
             output,
             run,
         } => {
@@ -482,8 +508,13 @@ fn run(cli: Cli) -> Result<(), String> {
             create_dir(&output)?;
             let total = (params.len() * batches as usize) as u64;
             let bar = progress_bar(quiet, total);
+            let direction = match (translate, perturb) {
+                (Some(t), _) => format!("the translation ({}, {}, {})", t[0], t[1], t[2]),
+                (None, Some(seed)) => format!("a random perturbation (seed {seed})"),
+                (None, None) => "θ·(1+s)".to_string(),
+            };
             println!(
-                "d/ds Σ image along θ·(1+s), {batches} batches × {spp} spp (mean ± standard error)"
+                "d/ds Σ image along {direction}, {batches} batches × {spp} spp (mean ± standard error)"
             );
             println!(
                 "{:<40} {:>24} {:>24} {:>24} {:>8} {:>8}",
@@ -494,10 +525,18 @@ fn run(cli: Cli) -> Result<(), String> {
                 if let Some(b) = &bar {
                     b.set_message(format!("checking {key}"));
                 }
+                let tangent = match (translate, perturb) {
+                    (Some(t), _) => Some(translation_tangent(&scene, key, t).map_err(err)?),
+                    (None, Some(seed)) => {
+                        Some(perturbation_tangent(&scene, key, seed).map_err(err)?)
+                    }
+                    (None, None) => None,
+                };
                 let opts = CheckOptions {
                     spp,
                     batches,
                     eps,
+                    tangent,
                     threads: run.threads,
                     force: run.force,
                     progress: bar.clone().map(|b| {

@@ -60,6 +60,11 @@ pub struct CheckOptions {
     pub progress: Option<Arc<ProgressFn>>,
     /// Passed on to [`RenderOptions::force`].
     pub force: bool,
+    /// The direction of the derivative, as long as the parameter (default:
+    /// the parameter's own value, see [`CheckReport::tangent`]). Geometry
+    /// is checked along translations, rotations or perturbations of its
+    /// vertices ([`translation_tangent`], [`perturbation_tangent`]).
+    pub tangent: Option<Vec<f32>>,
 }
 
 impl Default for CheckOptions {
@@ -71,6 +76,7 @@ impl Default for CheckOptions {
             threads: None,
             progress: None,
             force: false,
+            tangent: None,
         }
     }
 }
@@ -92,6 +98,44 @@ pub struct CheckReport {
     pub forward_image: Rendered,
 }
 
+/// A tangent that moves parameter `key` by the translation `t`: every
+/// point of a `[n, 3]` array (vertex positions, a sphere's centre), or the
+/// translation column of a `[4, 4]` row-major `to_world`.
+pub fn translation_tangent(scene: &Scene, key: &str, t: [f32; 3]) -> Result<Vec<f32>> {
+    let p = scene.params.get(scene.params.require(key)?);
+    match p.shape.as_slice() {
+        [4, 4] => {
+            let mut v = vec![0.0; 16];
+            (v[3], v[7], v[11]) = (t[0], t[1], t[2]);
+            Ok(v)
+        }
+        [.., 3] => Ok((0..p.data.len()).map(|i| t[i % 3]).collect()),
+        s => Err(Error::Param {
+            key: key.into(),
+            msg: format!(
+                "a translation moves [n, 3] points or a [4, 4] to_world; this parameter has shape {s:?}"
+            ),
+        }),
+    }
+}
+
+/// A random tangent with elements uniform in [−1, 1) (seeded), e.g. a
+/// perturbation of every vertex.
+pub fn perturbation_tangent(scene: &Scene, key: &str, seed: u64) -> Result<Vec<f32>> {
+    let n = scene.params.data(scene.params.require(key)?).len();
+    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    Ok((0..n)
+        .map(|_| {
+            // xorshift64*
+            s ^= s >> 12;
+            s ^= s << 25;
+            s ^= s >> 27;
+            let r = s.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40;
+            r as f32 / (1u64 << 23) as f32 - 1.0
+        })
+        .collect())
+}
+
 /// Checks the derivative with respect to parameter `key`.
 pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Result<CheckReport> {
     if opts.batches == 0 || opts.spp == 0 {
@@ -108,10 +152,21 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
         });
     }
     let theta: Vec<f32> = p.data.clone();
-    let tangent: Vec<f32> = if theta.iter().all(|&v| v == 0.0) {
-        vec![1.0; theta.len()]
-    } else {
-        theta.clone()
+    let tangent: Vec<f32> = match &opts.tangent {
+        Some(t) if t.len() != theta.len() => {
+            return Err(Error::Param {
+                key: key.into(),
+                msg: format!(
+                    "the tangent has {} values, the parameter {} (shape {:?})",
+                    t.len(),
+                    theta.len(),
+                    p.shape
+                ),
+            })
+        }
+        Some(t) => t.clone(),
+        None if theta.iter().all(|&v| v == 0.0) => vec![1.0; theta.len()],
+        None => theta.clone(),
     };
     let (mut fd, mut fw, mut rv) = (Vec::new(), Vec::new(), Vec::new());
     let mut fd_sum: Option<Vec<f64>> = None;

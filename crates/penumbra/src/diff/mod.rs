@@ -7,7 +7,9 @@ mod check;
 mod forward;
 mod prb;
 
-pub use check::{check_gradient, CheckOptions, CheckReport, Estimate};
+pub use check::{
+    check_gradient, perturbation_tangent, translation_tangent, CheckOptions, CheckReport, Estimate,
+};
 pub use forward::render_forward;
 pub use prb::{render_backward, GradEntry, Gradients};
 
