@@ -138,7 +138,7 @@ impl Scene {
                 Class::Emitter => {
                     b.emitter(&node, None)?;
                 }
-                Class::Sensor => b.sensors.push(Sensor::from_node(&node)?),
+                Class::Sensor => b.sensors.push(Sensor::from_node(&node, &mut b.ctx.store)?),
                 Class::Integrator => {
                     if b.integrator.is_some() {
                         return Err(node.error("a scene can have only one <integrator>"));

@@ -182,7 +182,7 @@ impl Scene {
     /// Applies parameter updates: refreshes what depends on the changed
     /// parameters (vertex normals and the acceleration structure after
     /// vertex moves, envmap sampling after texel changes, BSDF sampling
-    /// weights).
+    /// weights), and checks the sensors' poses and fields of view.
     pub fn update(&mut self) -> Result<()> {
         let changed = self.params.take_dirty();
         if changed.is_empty() {
@@ -204,6 +204,9 @@ impl Scene {
         }
         for b in &mut self.bsdfs {
             b.parameters_changed(&self.params);
+        }
+        for s in &self.sensors {
+            s.parameters_changed(&self.params)?;
         }
         Ok(())
     }
