@@ -365,3 +365,6 @@ fn add_scalar(
         )
         .map_err(|e| node.error(e))
 }
+
+#[cfg(test)]
+mod tests;
