@@ -148,6 +148,33 @@ fn params_lists_every_key_with_shape_flags_and_value() {
         words(box_positions).contains("[24, 3] differentiable, discontinuous finite min "),
         "{box_positions}"
     );
+    // the camera's pose and field of view (cbox's sensor has id "sensor")
+    let row = |key: &str| {
+        let l = lines
+            .iter()
+            .find(|l| l.split_whitespace().next() == Some(key))
+            .unwrap_or_else(|| panic!("{key} is listed"));
+        words(l)
+    };
+    assert!(
+        row("sensor.to_world")
+            .starts_with("sensor.to_world [4, 4] differentiable, discontinuous finite min "),
+        "{out}"
+    );
+    assert!(
+        row("sensor.x_fov")
+            .starts_with("sensor.x_fov [1] differentiable, discontinuous finite and > 0 [39.3"),
+        "{out}"
+    );
+    for key in [
+        "sensor.principal_point_offset_x",
+        "sensor.principal_point_offset_y",
+    ] {
+        assert_eq!(
+            row(key),
+            format!("{key} [1] differentiable, discontinuous finite [0.0000]")
+        );
+    }
     // one line per parameter: the same keys as the library's store
     let scene = penumbra::scene::Scene::load_file(&cbox(), &[]).unwrap();
     assert_eq!(lines.len(), scene.params.len() + 1);

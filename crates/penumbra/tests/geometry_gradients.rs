@@ -300,11 +300,17 @@ fn textured_area_emitter_translated_and_rotated() {
 
 #[test]
 fn rotated_vertex_normals() {
-    // the plane as a PLY mesh with vertex normals
-    let plane = PLANE.replace(
-        r#"<shape type="rectangle" id="plane">"#,
-        r#"<shape type="ply" id="plane"><string name="filename" value="meshes/plane_uv.ply"/>"#,
-    );
+    // the plane as a PLY mesh with vertex normals (in the file: the xz
+    // plane, normal +y)
+    let plane = PLANE
+        .replace(
+            r#"<shape type="rectangle" id="plane">"#,
+            r#"<shape type="ply" id="plane"><string name="filename" value="meshes/plane_uv.ply"/>"#,
+        )
+        .replace(
+            r#"<scale value="10"/>"#,
+            r#"<scale value="10"/><rotate x="1" angle="90"/>"#,
+        );
     let xml = scene_xml(
         EMITTER_SAMPLING,
         &oblique_sensor(),
@@ -316,6 +322,15 @@ fn rotated_vertex_normals() {
         &xml,
         "plane.vertex_normals",
         |n| translation(n.len(), [0.3, 0.0, 0.0]),
+        1e-3,
+    );
+    // positions rotated without the normals: Mitsuba recomputes the normals
+    // from the positions, so their derivative follows the positions'
+    check(
+        "positions rotated, normals follow",
+        &xml,
+        "plane.vertex_positions",
+        |p| rotation(p, [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
         1e-3,
     );
 }
@@ -487,4 +502,96 @@ fn forward_and_reverse_mode_agree_for_every_geometry_parameter_kind() {
     for key in ["ball.center", "ball.radius"] {
         assert_forward_matches_reverse(key, &sphere, key);
     }
+    let camera = camera_scene("perspective", "");
+    for key in ["camera.to_world", "camera.x_fov", "plane.vertex_positions"] {
+        assert_forward_matches_reverse(key, &camera, key);
+    }
+}
+
+/// A camera (id `camera`) of type `kind` at (0, −1.5, 3) looking at the
+/// origin, over the textured plane lit by a point light.
+fn camera_scene(kind: &str, extra: &str) -> String {
+    let sensor = format!(
+        r#"<sensor type="{kind}" id="camera">
+            {extra}
+            <transform name="to_world">
+                <lookat origin="0, -1.5, 3" target="0, 0, 0" up="0, 1, 0"/>
+            </transform>
+            <film type="hdrfilm">
+                <integer name="width" value="{SIZE}"/>
+                <integer name="height" value="{SIZE}"/>
+                <rfilter type="box"/>
+            </film>
+        </sensor>"#
+    );
+    let light = r#"<emitter type="point">
+            <point name="position" value="0.5, -0.5, 1.5"/>
+            <rgb name="intensity" value="6"/>
+        </emitter>"#;
+    scene_xml(EMITTER_SAMPLING, &sensor, &format!("{PLANE}{light}"))
+}
+
+#[test]
+fn camera_moved_in_front_of_a_plane_that_fills_the_view() {
+    // row-major to_world: translation (x, y, z) and a rotation about the
+    // camera's local y axis (d/dα of R_y(α) at 0, applied on the right)
+    let translate = |_: &[f32]| {
+        let mut t = vec![0.0f32; 16];
+        (t[3], t[7], t[11]) = (0.7, 0.3, -0.5);
+        t
+    };
+    let turn = |m: &[f32]| {
+        // M · G with G the generator of rotations about local y
+        let g = [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]];
+        let mut t = vec![0.0f32; 16];
+        for r in 0..3 {
+            for c in 0..3 {
+                t[4 * r + c] = (0..3).map(|k| m[4 * r + k] * g[k][c]).sum();
+            }
+        }
+        t
+    };
+    let perspective = camera_scene("perspective", r#"<float name="fov" value="40"/>"#);
+    check(
+        "perspective moved",
+        &perspective,
+        "camera.to_world",
+        translate,
+        1e-3,
+    );
+    check(
+        "perspective turned",
+        &perspective,
+        "camera.to_world",
+        turn,
+        1e-3,
+    );
+    check(
+        "perspective x_fov",
+        &perspective,
+        "camera.x_fov",
+        |_| vec![1.0],
+        1e-2,
+    );
+    let thinlens = camera_scene(
+        "thinlens",
+        r#"<float name="fov" value="40"/>
+           <float name="aperture_radius" value="0.1"/>
+           <float name="focus_distance" value="3"/>"#,
+    );
+    check(
+        "thin lens moved",
+        &thinlens,
+        "camera.to_world",
+        translate,
+        1e-3,
+    );
+    let ortho = camera_scene("orthographic", "");
+    check(
+        "orthographic moved",
+        &ortho,
+        "camera.to_world",
+        translate,
+        1e-3,
+    );
 }

@@ -38,6 +38,9 @@ impl Real for Dual {
     fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
         Dual::new(store.value(id, index), store.tangent(id, index))
     }
+    fn tracks(store: &ParamStore, id: ParamId) -> bool {
+        store.get(id).tangent.is_some()
+    }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();
         self.chain(s, if s > 0.0 { 0.5 / s } else { 0.0 })

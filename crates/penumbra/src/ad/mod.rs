@@ -58,6 +58,12 @@ pub trait Real:
     /// Element `index` of parameter `id`, read from `store`: the one place
     /// where derivatives are seeded (forward) or tagged (reverse).
     fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self;
+    /// Whether reads of parameter `id` carry derivatives (a tangent is set
+    /// in forward mode, its gradient is requested in reverse mode): lets
+    /// code that only exists for such derivatives be skipped.
+    fn tracks(_store: &ParamStore, _id: ParamId) -> bool {
+        false
+    }
 
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;

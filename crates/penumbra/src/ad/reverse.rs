@@ -159,6 +159,10 @@ impl Real for Var {
     fn val(self) -> f32 {
         self.v
     }
+    fn tracks(store: &ParamStore, id: ParamId) -> bool {
+        let p = store.get(id);
+        p.flags.differentiable && p.grad_enabled
+    }
     fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
         let v = store.value(id, index);
         let p = store.get(id);

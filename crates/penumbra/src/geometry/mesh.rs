@@ -86,6 +86,9 @@ pub struct Mesh {
     /// Triangle selection by area for [`ShapeT::sample_position`].
     area_distr: DiscreteDistribution,
     area: f32,
+    /// Faces around each vertex, for the derivatives of vertex normals that
+    /// follow the positions (empty without vertex normals).
+    vertex_faces: VertexFaces,
     /// Unit geometric normal per face (flipped with `flip_normals`; zero
     /// for a degenerate face), derived from the positions with the area
     /// table (f32, not differentiated: used by position sampling).
@@ -234,7 +237,13 @@ impl Mesh {
             )?),
             None => None,
         };
+        let vertex_faces = if normals.is_some() {
+            VertexFaces::new(nv, &data.faces)
+        } else {
+            VertexFaces::default()
+        };
         let mut mesh = Mesh {
+            vertex_faces,
             plugin,
             key: key.to_string(),
             source: source.to_string(),
@@ -392,6 +401,22 @@ impl Mesh {
         si
     }
 
+    /// The vertex normal of vertex `v` recomputed from the positions in `R`
+    /// (the same formula as [`vertex_normals`]).
+    fn derived_normal<R: Real>(&self, store: &ParamStore, v: usize) -> V3<R> {
+        let mut acc = V3::zero();
+        for &f in self.vertex_faces.of(v) {
+            let face = self.faces[f as usize];
+            let p = face.map(|i| store.read3(self.positions, i as usize));
+            let k = face
+                .iter()
+                .position(|&i| i as usize == v)
+                .expect("the adjacency lists faces of the vertex");
+            acc += corner_normal(p, k);
+        }
+        acc.normalize()
+    }
+
     /// The point of triangle `hit.prim` at the fixed barycentrics `hit.uv`,
     /// moving with the triangle's vertices; `wi` is left zero.
     pub fn triangle_point<R: Real>(&self, store: &ParamStore, hit: &Hit) -> SurfaceInteraction<R> {
@@ -446,9 +471,20 @@ impl Mesh {
         };
         let mut ns = match self.normals {
             Some(nid) => {
-                let n0: V3<R> = store.read3(nid, i0);
-                let n1: V3<R> = store.read3(nid, i1);
-                let n2: V3<R> = store.read3(nid, i2);
+                // As Mitsuba recomputes vertex normals from moved positions
+                // (unless the normals are set too), their derivative follows
+                // the positions' unless they carry their own.
+                let follow = R::tracks(store, self.positions) && !R::tracks(store, nid);
+                let normal = |i: usize| -> V3<R> {
+                    let n: V3<R> = store.read3(nid, i);
+                    if follow {
+                        let d = self.derived_normal::<R>(store, i);
+                        n + (d - V3::cst(d.val()))
+                    } else {
+                        n
+                    }
+                };
+                let (n0, n1, n2) = (normal(i0), normal(i1), normal(i2));
                 let s = n0 * b0 + n1 * b1 + n2 * b2;
                 if s.length_squared().val() > 0.0 {
                     s.normalize()
@@ -588,23 +624,64 @@ fn count_non_manifold_edges(faces: &[[u32; 3]]) -> usize {
 pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
     let mut acc = vec![Vec3::ZERO; positions.len()];
     for f in faces {
-        let p = [
-            positions[f[0] as usize],
-            positions[f[1] as usize],
-            positions[f[2] as usize],
-        ];
-        if is_degenerate(p[0], p[1], p[2]) {
-            continue;
-        }
-        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-        for k in 0..3 {
-            let d0 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
-            let d1 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
-            let angle = d0.dot(d1).clamp(-1.0, 1.0).acos();
-            acc[f[k] as usize] += n * angle;
+        let p = f.map(|i| V3::<f32>::cst(positions[i as usize]));
+        for (k, &i) in f.iter().enumerate() {
+            acc[i as usize] += corner_normal(p, k).val();
         }
     }
     acc.iter().map(|n| n.normalize_or_zero()).collect()
+}
+
+/// What corner `k` of the triangle `p` adds to its vertex's normal: the
+/// unit face normal weighted by the corner's angle (Thürmer and Wüthrich
+/// 1998, "Computing vertex normals from polygonal facets"); zero for a
+/// degenerate face.
+fn corner_normal<R: Real>(p: [V3<R>; 3], k: usize) -> V3<R> {
+    if is_degenerate(p[0].val(), p[1].val(), p[2].val()) {
+        return V3::zero();
+    }
+    let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+    let d0 = (p[(k + 1) % 3] - p[k]).normalize();
+    let d1 = (p[(k + 2) % 3] - p[k]).normalize();
+    n * d0.dot(d1).clamp(-1.0, 1.0).acos()
+}
+
+/// The faces around each vertex (compressed rows: the faces of vertex `v`
+/// are `faces[offsets[v]..offsets[v + 1]]`).
+#[derive(Clone, Debug, Default)]
+struct VertexFaces {
+    offsets: Vec<u32>,
+    faces: Vec<u32>,
+}
+
+impl VertexFaces {
+    fn new(vertex_count: usize, faces: &[[u32; 3]]) -> Self {
+        let mut offsets = vec![0u32; vertex_count + 1];
+        for f in faces {
+            for &v in f {
+                offsets[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..vertex_count {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut next = offsets.clone();
+        let mut out = vec![0u32; 3 * faces.len()];
+        for (fi, f) in faces.iter().enumerate() {
+            for &v in f {
+                out[next[v as usize] as usize] = fi as u32;
+                next[v as usize] += 1;
+            }
+        }
+        VertexFaces {
+            offsets,
+            faces: out,
+        }
+    }
+
+    fn of(&self, v: usize) -> &[u32] {
+        &self.faces[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    }
 }
 
 #[cfg(test)]

@@ -34,12 +34,17 @@ impl Builder {
         if let Some(&i) = self.bsdf_of_node.get(&Rc::as_ptr(node)) {
             return Ok(i);
         }
-        let b = Bsdf::from_node(node, &mut self.ctx)?;
-        node.check_all_used()?;
-        let i = self.bsdfs.len() as u32;
-        self.bsdfs.push(b);
+        let i = self.new_bsdf(node)?;
         self.bsdf_of_node.insert(Rc::as_ptr(node), i);
         Ok(i)
+    }
+
+    /// Builds a BSDF that is not shared: no node pointer is remembered.
+    fn new_bsdf(&mut self, node: &Node) -> Result<u32> {
+        let b = Bsdf::from_node(node, &mut self.ctx)?;
+        node.check_all_used()?;
+        self.bsdfs.push(b);
+        Ok(self.bsdfs.len() as u32 - 1)
     }
 
     /// The BSDF of a shape that names none: Mitsuba's default, a diffuse
@@ -60,7 +65,10 @@ impl Builder {
                 shape.loc.clone(),
             ));
         }
-        self.bsdf(&Rc::new(node))
+        // Not through `bsdf`: the node is dropped on return, so its address
+        // can be reused by the next default node and hit a stale entry of
+        // `bsdf_of_node` (the next shape would get this shape's BSDF).
+        self.new_bsdf(&node)
     }
 
     fn emitter(&mut self, node: &Node, shape: Option<u32>) -> Result<u32> {
@@ -138,7 +146,7 @@ impl Scene {
                 Class::Emitter => {
                     b.emitter(&node, None)?;
                 }
-                Class::Sensor => b.sensors.push(Sensor::from_node(&node)?),
+                Class::Sensor => b.sensors.push(Sensor::from_node(&node, &mut b.ctx.store)?),
                 Class::Integrator => {
                     if b.integrator.is_some() {
                         return Err(node.error("a scene can have only one <integrator>"));

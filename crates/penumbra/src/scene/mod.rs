@@ -194,7 +194,7 @@ impl Scene {
     /// Applies parameter updates: refreshes what depends on the changed
     /// parameters (vertex normals and the acceleration structure after
     /// vertex moves, envmap sampling after texel changes, BSDF sampling
-    /// weights).
+    /// weights), and checks the sensors' poses and fields of view.
     pub fn update(&mut self) -> Result<()> {
         let changed = self.params.take_dirty();
         if changed.is_empty() {
@@ -205,9 +205,12 @@ impl Scene {
         }
         // normals recomputed above are consequences, not new updates
         self.params.take_dirty();
-        if changed
+        // only surfaces that moved need the acceleration structure refit
+        // (a camera move does not)
+        if self
+            .shapes
             .iter()
-            .any(|&id| self.params.get(id).flags.discontinuous)
+            .any(|s| s.geometry_params().iter().any(|id| changed.contains(id)))
         {
             self.accel.update(&self.shapes, &self.params);
         }
@@ -216,6 +219,9 @@ impl Scene {
         }
         for b in &mut self.bsdfs {
             b.parameters_changed(&self.params);
+        }
+        for s in &self.sensors {
+            s.parameters_changed(&self.params)?;
         }
         Ok(())
     }

@@ -11,13 +11,14 @@ pub use perspective::Perspective;
 pub use thinlens::ThinLens;
 
 use crate::ad::Real;
-use crate::error::Result;
-use crate::geometry::{DiffRay, Ray};
+use crate::error::{Error, Result};
+use crate::geometry::DiffRay;
 use crate::image::{Film, ReconstructionFilter};
-use crate::params::ParamStore;
+use crate::math::{Transform, V3};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::sampler::{Independent, Sampler};
 use crate::scene::{Class, Node};
-use glam::Vec2;
+use glam::{Mat4, Vec2};
 
 /// The camera models.
 #[derive(Clone, Debug)]
@@ -49,15 +50,75 @@ impl CameraSample<'_> {
 }
 
 /// A camera with its film and sampler.
+///
+/// Its pose and lens live in the scene's [`ParamStore`] under Mitsuba's
+/// `traverse()` names, prefixed by `key`: `<key>.to_world` for every camera
+/// (see the camera types for the others). All are geometry parameters:
+/// moving the camera moves silhouettes across the image.
 #[derive(Clone, Debug)]
 pub struct Sensor {
+    /// Parameter-key prefix (the sensor's id, or `_unnamed_<n>`).
+    pub key: String,
     pub camera: Camera,
     pub film: Film,
     pub sampler: Sampler,
+    pose: Pose,
+}
+
+/// Where a sensor's `to_world` comes from.
+#[derive(Clone, Copy, Debug)]
+enum Pose {
+    /// The `<key>.to_world` parameter (differentiable).
+    Param(ParamId),
+    /// A constant pose, for a copy placed elsewhere by
+    /// [`Sensor::with_to_world`]: not a parameter, so not differentiated.
+    Fixed(Transform),
+}
+
+/// A sensor's `to_world` in `R`, row-major.
+pub(crate) struct ToWorld<R>([R; 16]);
+
+impl<R: Real> ToWorld<R> {
+    fn read(pose: &Pose, store: &ParamStore) -> Self {
+        ToWorld(match pose {
+            Pose::Param(id) => std::array::from_fn(|i| store.read(*id, i)),
+            Pose::Fixed(t) => {
+                let rows = t.m.transpose().to_cols_array();
+                std::array::from_fn(|i| R::cst(rows[i]))
+            }
+        })
+    }
+
+    /// Row `k` of the linear part applied to `v`, summed in the order of
+    /// glam's matrix product, so that `R = f32` reproduces [`Transform`]
+    /// bit for bit (the reference images do not change).
+    #[inline(always)]
+    fn row(&self, k: usize, v: V3<R>) -> R {
+        let m = &self.0[4 * k..4 * k + 3];
+        v.x * m[0] + v.y * m[1] + v.z * m[2]
+    }
+
+    #[inline(always)]
+    pub(crate) fn point(&self, p: V3<R>) -> V3<R> {
+        let row = |k: usize| self.row(k, p) + self.0[4 * k + 3];
+        let (x, y, z, w) = (row(0), row(1), row(2), row(3));
+        if w.val() == 1.0 {
+            V3::new(x, y, z)
+        } else {
+            V3::new(x / w, y / w, z / w)
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn vector(&self, v: V3<R>) -> V3<R> {
+        V3::new(self.row(0, v), self.row(1, v), self.row(2, v))
+    }
 }
 
 impl Sensor {
-    pub fn from_node(node: &Node) -> Result<Sensor> {
+    /// Builds the sensor of a `<sensor>` node and registers its parameters
+    /// in `store`.
+    pub fn from_node(node: &Node, store: &mut ParamStore) -> Result<Sensor> {
         let film = match node.children(Class::Film).as_slice() {
             [] => Film::new(
                 768,
@@ -83,9 +144,21 @@ impl Sensor {
             _ => return Err(node.error("more than one <sampler>")),
         };
         let aspect = film.width as f32 / film.height as f32;
+        let to_world = node.transform("to_world")?;
+        let pose = Pose::Param(
+            store
+                .add(
+                    format!("{}.to_world", node.key),
+                    to_world.m.transpose().to_cols_array().to_vec(),
+                    vec![4, 4],
+                    ParamFlags::GEOMETRY,
+                    Domain::Finite,
+                )
+                .map_err(|e| node.error(e))?,
+        );
         let camera = match node.plugin.as_str() {
-            "perspective" => Camera::Perspective(Perspective::from_node(node, aspect)?),
-            "thinlens" => Camera::ThinLens(ThinLens::from_node(node, aspect)?),
+            "perspective" => Camera::Perspective(Perspective::from_node(node, aspect, store)?),
+            "thinlens" => Camera::ThinLens(ThinLens::from_node(node, aspect, store)?),
             "orthographic" => Camera::Orthographic(Orthographic::from_node(node, aspect)?),
             other => {
                 return Err(node.error(format!(
@@ -94,29 +167,50 @@ impl Sensor {
             }
         };
         node.check_all_used()?;
-        Ok(Sensor {
+        let sensor = Sensor {
+            key: node.key.clone(),
             camera,
             film,
             sampler,
-        })
+            pose,
+        };
+        sensor
+            .parameters_changed(store)
+            .map_err(|e| node.error(e))?;
+        Ok(sensor)
     }
 
-    /// The ray through film position `pos` (in [0,1]² over the full film,
-    /// (0,0) = top-left), with `lens` ∈ [0,1]² for cameras with an aperture.
-    #[inline]
-    pub fn sample_ray(&self, pos: Vec2, lens: Vec2) -> Ray {
+    /// Checks the sensor's parameters after an update: `to_world` must be
+    /// invertible (a camera is placed, not collapsed), the field of view in
+    /// (0°, 180°). Rays read the parameters directly, so nothing is cached.
+    pub fn parameters_changed(&self, store: &ParamStore) -> Result<()> {
+        if let Pose::Param(id) = self.pose {
+            let rows: [f32; 16] = std::array::from_fn(|i| store.value(id, i));
+            if Transform::new(Mat4::from_cols_array(&rows).transpose()).is_none() {
+                return Err(Error::Param {
+                    key: store.get(id).key.clone(),
+                    msg: "the camera's to_world must be finite and invertible".into(),
+                });
+            }
+        }
         match &self.camera {
-            Camera::Perspective(c) => c.sample_ray(pos),
-            Camera::ThinLens(c) => c.sample_ray(pos, lens),
-            Camera::Orthographic(c) => c.sample_ray(pos),
+            Camera::Perspective(c) => c.frustum.check(store),
+            Camera::ThinLens(c) => c.frustum.check(store),
+            Camera::Orthographic(_) => Ok(()),
         }
     }
 
-    /// The ray through film position `film` and lens position `lens`, in
-    /// `R` (see [`CameraSample`]).
+    /// The ray through film position `film` (in [0,1]² over the full film,
+    /// (0,0) = top-left) and lens position `lens` ∈ [0,1]², in `R`: origin
+    /// and direction follow the sensor's parameters (see [`CameraSample`]).
     #[inline]
-    pub fn ray<R: Real>(&self, _store: &ParamStore, film: Vec2, lens: Vec2) -> DiffRay<R> {
-        DiffRay::cst(&self.sample_ray(film, lens))
+    pub fn ray<R: Real>(&self, store: &ParamStore, film: Vec2, lens: Vec2) -> DiffRay<R> {
+        let to_world = ToWorld::read(&self.pose, store);
+        match &self.camera {
+            Camera::Perspective(c) => c.ray(store, &to_world, film),
+            Camera::ThinLens(c) => c.ray(store, &to_world, film, lens),
+            Camera::Orthographic(c) => c.ray(&to_world, film),
+        }
     }
 
     /// True if rays need a lens sample (thin lens with an aperture).
@@ -125,15 +219,13 @@ impl Sensor {
     }
 
     /// The same sensor (film, sampler, lens) placed at another pose, e.g.
-    /// for the extra views of a multi-view optimisation.
-    pub fn with_to_world(&self, to_world: crate::math::Transform) -> Sensor {
-        let mut s = self.clone();
-        match &mut s.camera {
-            Camera::Perspective(c) => c.to_world = to_world,
-            Camera::ThinLens(c) => c.to_world = to_world,
-            Camera::Orthographic(c) => c.to_world = to_world,
+    /// for the extra views of a multi-view optimisation. The pose is a
+    /// constant of the copy: `<key>.to_world` no longer moves it.
+    pub fn with_to_world(&self, to_world: Transform) -> Sensor {
+        Sensor {
+            pose: Pose::Fixed(to_world),
+            ..self.clone()
         }
-        s
     }
 }
 
@@ -186,12 +278,93 @@ pub(crate) fn clip_range(node: &Node) -> Result<(f32, f32)> {
     Ok((near, far))
 }
 
-/// Camera-space direction through film position `pos` ∈ [0,1]² for a
-/// pinhole with horizontal half-angle tangent `tan_x`, as Mitsuba maps it:
-/// film x grows towards camera −x ("left" is +x), film y downwards.
-#[inline(always)]
-pub(crate) fn pinhole_direction(pos: Vec2, tan_x: f32, aspect: f32, offset: Vec2) -> glam::Vec3 {
-    let x = (1.0 - 2.0 * pos.x + 2.0 * offset.x) * tan_x;
-    let y = (1.0 - 2.0 * pos.y + 2.0 * offset.y) * tan_x / aspect;
-    glam::Vec3::new(x, y, 1.0)
+/// The pinhole part shared by the perspective and thin-lens cameras:
+/// `<key>.x_fov` (horizontal field of view, degrees) and
+/// `<key>.principal_point_offset_x` / `_y` (in units of the film size),
+/// with the film's aspect ratio and the clip range.
+#[derive(Clone, Debug)]
+pub struct Frustum {
+    pub x_fov: ParamId,
+    pub principal_point_offset: [ParamId; 2],
+    pub aspect: f32,
+    pub near: f32,
+    pub far: f32,
 }
+
+impl Frustum {
+    fn from_node(node: &Node, aspect: f32, store: &mut ParamStore) -> Result<Frustum> {
+        let fov = fov_x(node, aspect)?;
+        let (near, far) = clip_range(node)?;
+        let offset_x = node.float("principal_point_offset_x", 0.0)?;
+        let offset_y = node.float("principal_point_offset_y", 0.0)?;
+        Ok(Frustum {
+            x_fov: add_scalar(node, "x_fov", fov, Domain::Positive, store)?,
+            principal_point_offset: [
+                add_scalar(
+                    node,
+                    "principal_point_offset_x",
+                    offset_x,
+                    Domain::Finite,
+                    store,
+                )?,
+                add_scalar(
+                    node,
+                    "principal_point_offset_y",
+                    offset_y,
+                    Domain::Finite,
+                    store,
+                )?,
+            ],
+            aspect,
+            near,
+            far,
+        })
+    }
+
+    /// The store's domain check gives fov > 0; a pinhole cannot see 180°.
+    fn check(&self, store: &ParamStore) -> Result<()> {
+        let fov = store.value(self.x_fov, 0);
+        if !(fov < 180.0) {
+            return Err(Error::Param {
+                key: store.get(self.x_fov).key.clone(),
+                msg: format!("must be in (0, 180) degrees, found {fov}"),
+            });
+        }
+        Ok(())
+    }
+
+    /// Camera-space direction (z = 1, not normalised) through film position
+    /// `pos` ∈ [0,1]², as Mitsuba maps it: film x grows towards camera −x
+    /// ("left" is +x), film y downwards.
+    #[inline(always)]
+    fn direction<R: Real>(&self, store: &ParamStore, pos: Vec2) -> V3<R> {
+        // `to_radians` spelled out, as the same f32 operations
+        let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
+        let [ox, oy] = self.principal_point_offset.map(|id| store.read::<R>(id, 0));
+        let x = (R::cst(1.0 - 2.0 * pos.x) + ox * 2.0) * tan_x;
+        let y = (R::cst(1.0 - 2.0 * pos.y) + oy * 2.0) * tan_x / self.aspect;
+        V3::new(x, y, R::cst(1.0))
+    }
+}
+
+/// Registers the scalar `<key>.<name>` of a camera (a geometry parameter).
+fn add_scalar(
+    node: &Node,
+    name: &str,
+    value: f32,
+    domain: Domain,
+    store: &mut ParamStore,
+) -> Result<ParamId> {
+    store
+        .add(
+            format!("{}.{name}", node.key),
+            vec![value],
+            vec![1],
+            ParamFlags::GEOMETRY,
+            domain,
+        )
+        .map_err(|e| node.error(e))
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,16 +1,18 @@
 //! The orthographic camera (Mitsuba's `orthographic`): parallel rays over
 //! the [-1,1] × [-1/aspect, 1/aspect] window, scaled by `to_world`.
+//!
+//! Parameter: `<key>.to_world`.
 
-use super::clip_range;
+use super::{clip_range, ToWorld};
+use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::Ray;
-use crate::math::Transform;
+use crate::geometry::DiffRay;
+use crate::math::V3;
 use crate::scene::Node;
 use glam::{Vec2, Vec3};
 
 #[derive(Clone, Debug)]
 pub struct Orthographic {
-    pub to_world: Transform,
     pub aspect: f32,
     pub near: f32,
     pub far: f32,
@@ -19,24 +21,20 @@ pub struct Orthographic {
 impl Orthographic {
     pub fn from_node(node: &Node, aspect: f32) -> Result<Orthographic> {
         let (near, far) = clip_range(node)?;
-        Ok(Orthographic {
-            to_world: node.transform("to_world")?,
-            aspect,
-            near,
-            far,
-        })
+        Ok(Orthographic { aspect, near, far })
     }
 
     #[inline]
-    pub fn sample_ray(&self, pos: Vec2) -> Ray {
+    pub(crate) fn ray<R: Real>(&self, to_world: &ToWorld<R>, pos: Vec2) -> DiffRay<R> {
         let local = Vec3::new(1.0 - 2.0 * pos.x, (1.0 - 2.0 * pos.y) / self.aspect, 0.0);
-        let d = self.to_world.vector(Vec3::Z);
+        let d = to_world.vector(V3::cst(Vec3::Z));
+        // the clip range scales with to_world's z axis
         let len = d.length();
-        Ray {
-            o: self.to_world.point(local),
-            d: d / len,
-            tmin: self.near * len,
-            tmax: self.far * len,
+        DiffRay {
+            o: to_world.point(V3::cst(local)),
+            d: V3::new(d.x / len, d.y / len, d.z / len),
+            tmin: self.near * len.val(),
+            tmax: self.far * len.val(),
         }
     }
 }

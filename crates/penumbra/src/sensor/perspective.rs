@@ -1,52 +1,46 @@
 //! The pinhole camera (Mitsuba's `perspective`).
+//!
+//! Parameters: `<key>.to_world`, `<key>.x_fov`,
+//! `<key>.principal_point_offset_x`, `<key>.principal_point_offset_y`.
 
-use super::{clip_range, fov_x, pinhole_direction};
+use super::{Frustum, ToWorld};
+use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::Ray;
-use crate::math::Transform;
+use crate::geometry::DiffRay;
+use crate::params::ParamStore;
 use crate::scene::Node;
 use glam::Vec2;
 
 /// A pinhole camera looking down its local +z.
 #[derive(Clone, Debug)]
 pub struct Perspective {
-    pub to_world: Transform,
-    /// tan of half the horizontal field of view.
-    pub tan_x: f32,
-    pub aspect: f32,
-    pub near: f32,
-    pub far: f32,
-    /// Principal point offset, in units of the film size.
-    pub offset: Vec2,
+    pub frustum: Frustum,
 }
 
 impl Perspective {
-    pub fn from_node(node: &Node, aspect: f32) -> Result<Perspective> {
-        let fov = fov_x(node, aspect)?;
-        let (near, far) = clip_range(node)?;
+    pub fn from_node(node: &Node, aspect: f32, store: &mut ParamStore) -> Result<Perspective> {
         // Mitsuba accepts (and ignores) a focus distance on pinholes.
         node.float("focus_distance", 0.0)?;
         Ok(Perspective {
-            to_world: node.transform("to_world")?,
-            tan_x: (fov.to_radians() * 0.5).tan(),
-            aspect,
-            near,
-            far,
-            offset: Vec2::new(
-                node.float("principal_point_offset_x", 0.0)?,
-                node.float("principal_point_offset_y", 0.0)?,
-            ),
+            frustum: Frustum::from_node(node, aspect, store)?,
         })
     }
 
     #[inline]
-    pub fn sample_ray(&self, pos: Vec2) -> Ray {
-        let d = pinhole_direction(pos, self.tan_x, self.aspect, self.offset).normalize();
-        Ray {
-            o: self.to_world.point(glam::Vec3::ZERO),
-            d: self.to_world.vector(d).normalize(),
-            tmin: self.near / d.z,
-            tmax: self.far / d.z,
+    pub(crate) fn ray<R: Real>(
+        &self,
+        store: &ParamStore,
+        to_world: &ToWorld<R>,
+        pos: Vec2,
+    ) -> DiffRay<R> {
+        let d = self.frustum.direction::<R>(store, pos).normalize();
+        // the clip distances are along the view axis
+        let dz = d.z.val();
+        DiffRay {
+            o: to_world.point(crate::math::V3::zero()),
+            d: to_world.vector(d).normalize(),
+            tmin: self.frustum.near / dz,
+            tmax: self.frustum.far / dz,
         }
     }
 }

@@ -1,57 +1,75 @@
 //! The thin-lens camera with depth of field (Mitsuba's `thinlens`).
+//!
+//! Parameters: those of the pinhole (`<key>.to_world`, `<key>.x_fov`,
+//! `<key>.principal_point_offset_x`, `_y`), `<key>.aperture_radius` and
+//! `<key>.focus_distance`.
 
-use super::{clip_range, fov_x, pinhole_direction};
+use super::{add_scalar, Frustum, ToWorld};
+use crate::ad::Real;
 use crate::error::Result;
-use crate::geometry::Ray;
-use crate::math::{warp, Transform};
+use crate::geometry::DiffRay;
+use crate::math::{warp, V3};
+use crate::params::{Domain, ParamId, ParamStore};
 use crate::scene::Node;
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 
 /// A thin lens of radius `aperture_radius` focused at `focus_distance`.
 #[derive(Clone, Debug)]
 pub struct ThinLens {
-    pub to_world: Transform,
-    pub tan_x: f32,
-    pub aspect: f32,
-    pub near: f32,
-    pub far: f32,
-    pub aperture_radius: f32,
-    pub focus_distance: f32,
+    pub frustum: Frustum,
+    pub aperture_radius: ParamId,
+    pub focus_distance: ParamId,
 }
 
 impl ThinLens {
-    pub fn from_node(node: &Node, aspect: f32) -> Result<ThinLens> {
-        let fov = fov_x(node, aspect)?;
-        let (near, far) = clip_range(node)?;
+    pub fn from_node(node: &Node, aspect: f32, store: &mut ParamStore) -> Result<ThinLens> {
+        let frustum = Frustum::from_node(node, aspect, store)?;
         let focus_distance = node.float_checked("focus_distance", 0.0, false)?;
         if !(focus_distance > 0.0) {
             return Err(node.error("thinlens needs a focus_distance > 0"));
         }
+        let aperture_radius = node.float_checked("aperture_radius", 0.03, false)?;
         Ok(ThinLens {
-            to_world: node.transform("to_world")?,
-            tan_x: (fov.to_radians() * 0.5).tan(),
-            aspect,
-            near,
-            far,
-            aperture_radius: node.float_checked("aperture_radius", 0.03, false)?,
-            focus_distance,
+            frustum,
+            aperture_radius: add_scalar(
+                node,
+                "aperture_radius",
+                aperture_radius,
+                Domain::NonNegative,
+                store,
+            )?,
+            focus_distance: add_scalar(
+                node,
+                "focus_distance",
+                focus_distance,
+                Domain::Positive,
+                store,
+            )?,
         })
     }
 
     /// Rays from a point on the lens through the point of the focal plane
     /// that the pinhole ray through `pos` reaches.
     #[inline]
-    pub fn sample_ray(&self, pos: Vec2, lens: Vec2) -> Ray {
-        let d = pinhole_direction(pos, self.tan_x, self.aspect, Vec2::ZERO);
-        let focus = d * self.focus_distance; // d.z == 1
-        let l = warp::square_to_uniform_disk_concentric(lens) * self.aperture_radius;
-        let o = Vec3::new(l.x, l.y, 0.0);
+    pub(crate) fn ray<R: Real>(
+        &self,
+        store: &ParamStore,
+        to_world: &ToWorld<R>,
+        pos: Vec2,
+        lens: Vec2,
+    ) -> DiffRay<R> {
+        let focus =
+            self.frustum.direction::<R>(store, pos) * store.read::<R>(self.focus_distance, 0); // d.z == 1
+        let l = warp::square_to_uniform_disk_concentric(lens);
+        let r = store.read::<R>(self.aperture_radius, 0);
+        let o = V3::new(r * l.x, r * l.y, R::cst(0.0));
         let dir = (focus - o).normalize();
-        Ray {
-            o: self.to_world.point(o),
-            d: self.to_world.vector(dir).normalize(),
-            tmin: self.near / dir.z,
-            tmax: self.far / dir.z,
+        let dz = dir.z.val();
+        DiffRay {
+            o: to_world.point(o),
+            d: to_world.vector(dir).normalize(),
+            tmin: self.frustum.near / dz,
+            tmax: self.frustum.far / dz,
         }
     }
 }

@@ -1,0 +1,331 @@
+//! Camera derivatives against finite differences, and pose updates through
+//! the parameter store against loading the pose from XML.
+
+use crate::ad::Dual;
+use crate::geometry::DiffRay;
+use crate::integrator::{render, RenderOptions};
+use crate::scene::Scene;
+use glam::{Mat3, Vec2, Vec3};
+use std::path::Path;
+
+/// A lit sphere on a floor, seen by `sensor` (an XML `<sensor>` element).
+fn scene(sensor: &str) -> Scene {
+    Scene::load_str(
+        &format!(
+            r#"<scene version="3.0.0">
+                {sensor}
+                <shape type="sphere"><float name="radius" value="0.5"/></shape>
+                <shape type="rectangle">
+                    <transform name="to_world">
+                        <rotate x="1" angle="-90"/><scale value="3"/><translate y="-0.5"/>
+                    </transform>
+                </shape>
+                <emitter type="constant"/>
+            </scene>"#
+        ),
+        Path::new("t.xml"),
+        &[],
+    )
+    .unwrap()
+}
+
+/// A `<sensor>` of plugin `plugin` at `origin`, looking at the sphere,
+/// with the extra properties `extra`.
+fn sensor(plugin: &str, origin: &str, extra: &str) -> String {
+    format!(
+        r#"<sensor type="{plugin}" id="cam">
+            {extra}
+            <transform name="to_world">
+                <lookat origin="{origin}" target="0, 0.2, 0" up="0, 1, 0"/>
+            </transform>
+            <film type="hdrfilm">
+                <integer name="width" value="12"/>
+                <integer name="height" value="9"/>
+            </film>
+            <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+        </sensor>"#
+    )
+}
+
+fn perspective() -> Scene {
+    perspective_at("1, 2, 3")
+}
+
+fn perspective_at(origin: &str) -> Scene {
+    scene(&sensor(
+        "perspective",
+        origin,
+        r#"<float name="fov" value="40"/>
+           <float name="principal_point_offset_x" value="0.05"/>
+           <float name="principal_point_offset_y" value="-0.1"/>"#,
+    ))
+}
+
+fn thinlens() -> Scene {
+    scene(&sensor(
+        "thinlens",
+        "1, 2, 3",
+        r#"<float name="fov" value="40"/>
+           <float name="principal_point_offset_x" value="0.05"/>
+           <float name="aperture_radius" value="0.2"/>
+           <float name="focus_distance" value="2.5"/>"#,
+    ))
+}
+
+fn orthographic() -> Scene {
+    // the scale makes the ray origins depend on every column of to_world
+    let sensor = sensor("orthographic", "1, 2, 3", "");
+    scene(&sensor.replace("<lookat", r#"<scale x="1.5" y="2" z="0.5"/><lookat"#))
+}
+
+/// Tangents of `<key>.to_world` (row-major 4×4): a translation, and the
+/// first-order change of an infinitesimal rotation about an oblique axis
+/// through the camera (W·M on the linear part, W skew-symmetric).
+fn to_world_tangents(scene: &Scene) -> [Vec<f32>; 2] {
+    let m = scene
+        .params
+        .data(scene.params.require("cam.to_world").unwrap());
+    let mut translation = vec![0.0; 16];
+    (translation[3], translation[7], translation[11]) = (1.0, -0.5, 0.25);
+    let linear = Mat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
+    let (ax, ay, az) = (0.3, 1.0, -0.2);
+    let w = Mat3::from_cols(
+        Vec3::new(0.0, az, -ay),
+        Vec3::new(-az, 0.0, ax),
+        Vec3::new(ay, -ax, 0.0),
+    );
+    let d = w * linear;
+    let mut rotation = vec![0.0; 16];
+    for r in 0..3 {
+        for c in 0..3 {
+            rotation[4 * r + c] = d.col(c)[r];
+        }
+    }
+    [translation, rotation]
+}
+
+/// Film and lens positions spread over the film and the aperture.
+const SAMPLES: [(Vec2, Vec2); 3] = [
+    (Vec2::new(0.1, 0.2), Vec2::new(0.3, 0.8)),
+    (Vec2::new(0.5, 0.5), Vec2::new(0.5, 0.5)),
+    (Vec2::new(0.93, 0.71), Vec2::new(0.9, 0.15)),
+];
+
+/// Checks the forward-mode derivative of the rays of sensor 0 along
+/// `tangent` of parameter `key` against central differences of the f32
+/// rays, with step `h` (in units of the tangent).
+///
+/// Tolerance 1e-3 · max(1, |fd|): the truncation error of a central
+/// difference is h²/6 · f''' ≈ 2e-5 for h = 1e-2 and ray components of
+/// order one with O(1) curvature; f32 rounding adds about
+/// ε·|f| / h ≈ 6e-8 · 4 / 1e-2 ≈ 2.5e-5. The bound leaves a factor of
+/// ten over both, and a wrong chain rule (a dropped or doubled term) is
+/// off by the size of the derivative itself, far above it.
+fn check(mut scene: Scene, key: &str, tangent: &[f32], h: f32) {
+    let id = scene.params.require(key).unwrap();
+    let base = scene.params.data(id).to_vec();
+    scene.params.set_tangent(key, tangent).unwrap();
+    let shifted = |s: f32| {
+        let mut store = scene.params.clone();
+        let v: Vec<f32> = base.iter().zip(tangent).map(|(b, t)| b + s * t).collect();
+        store.set(key, &v).unwrap();
+        store
+    };
+    let (plus, minus) = (shifted(h), shifted(-h));
+    let sensor = &scene.sensors[0];
+    let mut largest = 0.0f32;
+    for (film, lens) in SAMPLES {
+        let ad: DiffRay<Dual> = sensor.ray(&scene.params, film, lens);
+        let primal = sensor.ray::<f32>(&scene.params, film, lens);
+        assert_eq!(
+            ad.val().o,
+            primal.o.val(),
+            "{key}: Dual and f32 primal differ"
+        );
+        assert_eq!(
+            ad.val().d,
+            primal.d.val(),
+            "{key}: Dual and f32 primal differ"
+        );
+        let (p, m) = (
+            sensor.ray::<f32>(&plus, film, lens),
+            sensor.ray::<f32>(&minus, film, lens),
+        );
+        for (what, a, p, m) in [("origin", ad.o, p.o, m.o), ("direction", ad.d, p.d, m.d)] {
+            for (k, (a, (p, m))) in [a.x, a.y, a.z]
+                .into_iter()
+                .zip([p.x, p.y, p.z].into_iter().zip([m.x, m.y, m.z]))
+                .enumerate()
+            {
+                let fd = (p - m) / (2.0 * h);
+                let tol = 1e-3 * fd.abs().max(1.0);
+                assert!(
+                    (a.d - fd).abs() <= tol,
+                    "{key} {tangent:?}: d {what}[{k}] at film {film}, lens {lens}: \
+                     forward mode {}, central difference {fd}",
+                    a.d
+                );
+                largest = largest.max(a.d.abs());
+            }
+        }
+    }
+    // the parameter does move the rays: the comparison is not 0 = 0
+    assert!(largest > 1e-2, "{key}: derivatives all ~0 ({largest})");
+}
+
+#[test]
+fn perspective_ray_derivatives_match_finite_differences() {
+    let [translation, rotation] = to_world_tangents(&perspective());
+    check(perspective(), "cam.to_world", &translation, 1e-2);
+    check(perspective(), "cam.to_world", &rotation, 1e-2);
+    check(perspective(), "cam.x_fov", &[10.0], 1e-2);
+    check(perspective(), "cam.principal_point_offset_x", &[1.0], 1e-2);
+    check(perspective(), "cam.principal_point_offset_y", &[1.0], 1e-2);
+}
+
+#[test]
+fn thinlens_ray_derivatives_match_finite_differences() {
+    let [translation, rotation] = to_world_tangents(&thinlens());
+    check(thinlens(), "cam.to_world", &translation, 1e-2);
+    check(thinlens(), "cam.to_world", &rotation, 1e-2);
+    check(thinlens(), "cam.x_fov", &[10.0], 1e-2);
+    check(thinlens(), "cam.principal_point_offset_x", &[1.0], 1e-2);
+    check(thinlens(), "cam.principal_point_offset_y", &[1.0], 1e-2);
+    check(thinlens(), "cam.aperture_radius", &[1.0], 1e-2);
+    check(thinlens(), "cam.focus_distance", &[1.0], 1e-2);
+}
+
+#[test]
+fn orthographic_ray_derivatives_match_finite_differences() {
+    let [translation, rotation] = to_world_tangents(&orthographic());
+    check(orthographic(), "cam.to_world", &translation, 1e-2);
+    check(orthographic(), "cam.to_world", &rotation, 1e-2);
+}
+
+#[test]
+fn sensor_keys_flags_and_domains() {
+    let expect = |scene: &Scene, keys: &[(&str, &[usize])]| {
+        let listed: Vec<&str> = scene
+            .params
+            .iter()
+            .map(|(_, p)| p.key.as_str())
+            .filter(|k| k.starts_with("cam."))
+            .collect();
+        let want: Vec<&str> = keys.iter().map(|(k, _)| *k).collect();
+        assert_eq!(listed, want);
+        for (key, shape) in keys {
+            let p = scene.params.get(scene.params.require(key).unwrap());
+            assert_eq!(p.shape, *shape, "{key}");
+            assert!(p.flags.differentiable && p.flags.discontinuous, "{key}");
+        }
+    };
+    let pinhole: &[(&str, &[usize])] = &[
+        ("cam.to_world", &[4, 4]),
+        ("cam.x_fov", &[1]),
+        ("cam.principal_point_offset_x", &[1]),
+        ("cam.principal_point_offset_y", &[1]),
+    ];
+    expect(&perspective(), pinhole);
+    let lens = [
+        pinhole,
+        &[("cam.aperture_radius", &[1]), ("cam.focus_distance", &[1])],
+    ]
+    .concat();
+    expect(&thinlens(), &lens);
+    expect(&orthographic(), &[("cam.to_world", &[4, 4])]);
+    let s = perspective();
+    assert_eq!(
+        s.params.data(s.params.require("cam.x_fov").unwrap()),
+        [40.0]
+    );
+    // an unnamed sensor is keyed like other unnamed top-level objects
+    let unnamed = scene(&sensor("perspective", "0, 0, 3", "").replace(r#" id="cam""#, ""));
+    assert!(unnamed.params.id("_unnamed_0.x_fov").is_some());
+}
+
+#[test]
+fn invalid_updates_name_the_key() {
+    let mut s = perspective();
+    s.params.set("cam.x_fov", &[180.0]).unwrap();
+    let e = s.update().unwrap_err().to_string();
+    assert!(e.contains("cam.x_fov") && e.contains("(0, 180)"), "{e}");
+    let e = s.params.set("cam.x_fov", &[0.0]).unwrap_err().to_string();
+    assert!(e.contains("cam.x_fov") && e.contains("> 0"), "{e}");
+    let mut s = orthographic();
+    let mut flat = s
+        .params
+        .data(s.params.require("cam.to_world").unwrap())
+        .to_vec();
+    flat[2] = 0.0;
+    flat[6] = 0.0;
+    flat[10] = 0.0;
+    s.params.set("cam.to_world", &flat).unwrap();
+    let e = s.update().unwrap_err().to_string();
+    assert!(
+        e.contains("cam.to_world") && e.contains("invertible"),
+        "{e}"
+    );
+    let e = s
+        .params
+        .set("cam.to_world", &[f32::INFINITY; 16])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cam.to_world"), "{e}");
+}
+
+/// Renders sensor 0 of `scene` at 4 spp, single-threaded, fixed seed.
+fn image(scene: &Scene) -> Vec<f32> {
+    let opts = RenderOptions {
+        spp: Some(4),
+        seed: 7,
+        threads: Some(1),
+        ..Default::default()
+    };
+    render(scene, &opts).unwrap().data
+}
+
+#[test]
+fn setting_to_world_renders_as_loading_that_pose() {
+    for plugin in ["perspective", "thinlens", "orthographic"] {
+        let extra = if plugin == "thinlens" {
+            r#"<float name="focus_distance" value="3"/>"#
+        } else {
+            ""
+        };
+        let there = scene(&sensor(plugin, "-1, 1.5, 2.5", extra));
+        let mut moved = scene(&sensor(plugin, "1, 2, 3", extra));
+        let pose = there
+            .params
+            .data(there.params.require("cam.to_world").unwrap());
+        assert_ne!(
+            image(&moved),
+            image(&there),
+            "{plugin}: the poses look alike"
+        );
+        moved.params.set("cam.to_world", pose).unwrap();
+        moved.update().unwrap();
+        assert_eq!(image(&moved), image(&there), "{plugin}");
+    }
+}
+
+#[test]
+fn with_to_world_places_a_copy_that_ignores_the_parameter() {
+    let mut s = perspective();
+    let there = perspective_at("-1, 1.5, 2.5");
+    let t = crate::math::Transform::look_at(
+        Vec3::new(-1.0, 1.5, 2.5),
+        Vec3::new(0.0, 0.2, 0.0),
+        Vec3::Y,
+    )
+    .unwrap();
+    s.sensors[0] = s.sensors[0].with_to_world(t);
+    s.params.set_tangent("cam.to_world", &[1.0; 16]).unwrap();
+    let (film, lens) = SAMPLES[0];
+    let ray: DiffRay<Dual> = s.sensors[0].ray(&s.params, film, lens);
+    let want = there.sensors[0].ray::<f32>(&there.params, film, lens);
+    assert_eq!(ray.val().o, want.o.val());
+    assert_eq!(ray.val().d, want.d.val());
+    for c in [ray.o, ray.d] {
+        assert_eq!([c.x.d, c.y.d, c.z.d], [0.0; 3]);
+    }
+}
