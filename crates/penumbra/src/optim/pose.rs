@@ -22,6 +22,9 @@
 //! `∂L/∂r = J(r)ᵀ·Σ (y × g)`: the torque of the gradients about the pivot,
 //! mapped through `Jᵀ` (at `r = 0`, `J = I`).
 
+use crate::diff::Gradients;
+use crate::error::{Error, Result};
+use crate::params::ParamStore;
 use glam::{DMat3, DVec3};
 
 /// How a parameter's values are laid out for a pose.
@@ -49,6 +52,119 @@ pub struct Pose {
 pub struct PoseGrad {
     pub translation: DVec3,
     pub rotation: DVec3,
+}
+
+impl PoseLayout {
+    /// The layout of the parameter `key` of `shape`: a mesh's
+    /// `<id>.vertex_positions` (`[n, 3]`) or a `[4, 4]` `<id>.to_world`
+    /// (a shape's, or a sensor's); anything else is refused, naming both.
+    pub fn of_param(key: &str, shape: &[usize]) -> Result<PoseLayout> {
+        let refuse = |what: &str| Error::Param {
+            key: key.to_string(),
+            msg: format!(
+                "a pose moves a mesh's `<id>.vertex_positions` ([n, 3]) or a `<id>.to_world` \
+                 transform ([4, 4]); {what}"
+            ),
+        };
+        if key.ends_with(".vertex_positions") {
+            match shape {
+                [_, 3] => Ok(PoseLayout::Points),
+                _ => Err(refuse(&format!("this one has shape {shape:?}"))),
+            }
+        } else if key.ends_with(".to_world") {
+            match shape {
+                [4, 4] => Ok(PoseLayout::Matrix),
+                _ => Err(refuse(&format!("this one has shape {shape:?}"))),
+            }
+        } else {
+            Err(refuse("this key is neither"))
+        }
+    }
+}
+
+/// The vertex normals that turn with the vertex positions `key`
+/// (`<id>.vertex_normals`), if `key` is a mesh's positions.
+pub fn normals_key(key: &str) -> Option<String> {
+    key.strip_suffix(".vertex_positions")
+        .map(|id| format!("{id}.vertex_normals"))
+}
+
+/// A pose bound to a parameter of a store: the parameter's pose-free
+/// values (those it had when bound) and, for a mesh with vertex normals,
+/// the normals, turned with the positions and set together with them so
+/// that the mesh does not recompute them.
+#[derive(Clone, Debug)]
+pub struct PosedParam {
+    pub key: String,
+    pub layout: PoseLayout,
+    pub base: Vec<f32>,
+    pub normals: Option<(String, Vec<f32>)>,
+    pub pivot: DVec3,
+}
+
+impl PosedParam {
+    /// Binds to `key` of `store` as it is now; `pivot` defaults to
+    /// [`Pose::default_pivot`].
+    pub fn new(store: &ParamStore, key: &str, pivot: Option<DVec3>) -> Result<PosedParam> {
+        let p = store.get(store.require(key)?);
+        let layout = PoseLayout::of_param(key, &p.shape)?;
+        let normals = normals_key(key)
+            .and_then(|k| store.id(&k).map(|id| (k.clone(), store.data(id).to_vec())));
+        Ok(PosedParam {
+            key: key.to_string(),
+            layout,
+            pivot: pivot.unwrap_or_else(|| Pose::default_pivot(layout, &p.data)),
+            base: p.data.clone(),
+            normals,
+        })
+    }
+
+    /// The keys this pose writes (and whose gradients it reads).
+    pub fn keys(&self) -> Vec<&str> {
+        std::iter::once(self.key.as_str())
+            .chain(self.normals.as_ref().map(|(k, _)| k.as_str()))
+            .collect()
+    }
+
+    fn pose(&self, translation: DVec3, rotation: DVec3) -> Pose {
+        Pose {
+            translation,
+            rotation,
+            pivot: self.pivot,
+        }
+    }
+
+    /// Writes the posed values into `store` (call `Scene::update` after).
+    pub fn apply(&self, store: &mut ParamStore, translation: DVec3, rotation: DVec3) -> Result<()> {
+        let pose = self.pose(translation, rotation);
+        store.set(&self.key, &pose.apply(self.layout, &self.base))?;
+        if let Some((k, n0)) = &self.normals {
+            store.set(k, &pose.apply(PoseLayout::Directions, n0))?;
+        }
+        Ok(())
+    }
+
+    /// `∂L/∂(t, r)` from the parameters' gradients `grads` at the values
+    /// [`PosedParam::apply`] wrote for the same `(translation, rotation)`.
+    pub fn backprop(
+        &self,
+        grads: &Gradients,
+        translation: DVec3,
+        rotation: DVec3,
+    ) -> Result<PoseGrad> {
+        let pose = self.pose(translation, rotation);
+        let get = |k: &str| {
+            grads.get(k).ok_or_else(|| Error::Param {
+                key: k.to_string(),
+                msg: "no gradient was computed for this parameter".into(),
+            })
+        };
+        let mut g = pose.backprop(self.layout, &self.base, get(&self.key)?);
+        if let Some((k, n0)) = &self.normals {
+            g += pose.backprop(PoseLayout::Directions, n0, get(k)?);
+        }
+        Ok(g)
+    }
 }
 
 impl std::ops::AddAssign for PoseGrad {
