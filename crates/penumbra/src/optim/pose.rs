@@ -463,4 +463,73 @@ mod tests {
             DVec3::new(1.0, 2.0, -3.0)
         );
     }
+
+    /// A bound mesh pose turns the vertex normals with the positions, and
+    /// its gradient adds the normals' torque; other keys are refused.
+    #[test]
+    fn posed_mesh_turns_its_normals() {
+        use crate::params::{Domain, ParamFlags};
+        let mut store = ParamStore::new();
+        let f = ParamFlags::DIFFERENTIABLE;
+        let pos = base(PoseLayout::Points);
+        let nrm = [0.0, 1.0, 0.0].repeat(4);
+        store
+            .add(
+                "m.vertex_positions",
+                pos.clone(),
+                vec![4, 3],
+                f,
+                Domain::Finite,
+            )
+            .unwrap();
+        store
+            .add(
+                "m.vertex_normals",
+                nrm.clone(),
+                vec![4, 3],
+                f,
+                Domain::Finite,
+            )
+            .unwrap();
+        store
+            .add(
+                "m.bsdf.value",
+                vec![0.5; 3],
+                vec![3],
+                f,
+                Domain::UnitInterval,
+            )
+            .unwrap();
+        let b = PosedParam::new(&store, "m.vertex_positions", None).unwrap();
+        assert_eq!(b.keys(), ["m.vertex_positions", "m.vertex_normals"]);
+        let r = DVec3::new(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        b.apply(&mut store, DVec3::ZERO, r).unwrap();
+        let n = store.data(store.id("m.vertex_normals").unwrap());
+        assert!((n[0] + 1.0).abs() < 1e-6 && n[1].abs() < 1e-6, "{n:?}");
+        let grads = Gradients {
+            entries: vec![
+                crate::diff::GradEntry {
+                    key: "m.vertex_positions".into(),
+                    shape: vec![4, 3],
+                    data: vec![0.0; 12],
+                },
+                crate::diff::GradEntry {
+                    key: "m.vertex_normals".into(),
+                    shape: vec![4, 3],
+                    data: weights(12),
+                },
+            ],
+            ..Default::default()
+        };
+        let g = b.backprop(&grads, DVec3::ZERO, r).unwrap();
+        let want = b
+            .pose(DVec3::ZERO, r)
+            .backprop(PoseLayout::Directions, &nrm, &weights(12));
+        assert_eq!(g, want);
+        assert!(g.rotation.length() > 0.0);
+        let e = PosedParam::new(&store, "m.bsdf.value", None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("neither"), "{e}");
+    }
 }
