@@ -64,12 +64,9 @@ def check_chain_rule(pose, t, r):
 
 
 def test_mesh_pose_turns_normals_and_matches_finite_differences():
-    scene = pn.load_dict(
-        {
-            "type": "scene",
-            "m": {"type": "cube", "to_world": pn.Transform4f().translate([0.3, 0.1, 0])},
-        }
-    )
+    d = small_dict(res=8, spp=1)
+    d["m"] = {"type": "cube", "to_world": pn.Transform4f().translate([0.3, 0.1, 0])}
+    scene = pn.load_dict(d)
     params = pn.traverse(scene)
     pose = pn.Pose(params, "m.vertex_positions")
     assert pose.keys == ["m.vertex_positions", "m.vertex_normals"]
@@ -89,12 +86,9 @@ def test_mesh_pose_turns_normals_and_matches_finite_differences():
 
 
 def test_matrix_pose_on_a_disk():
-    scene = pn.load_dict(
-        {
-            "type": "scene",
-            "d": {"type": "disk", "to_world": pn.Transform4f().translate([1, 2, 3]).scale(0.5)},
-        }
-    )
+    d = small_dict(res=8, spp=1)
+    d["d"] = {"type": "disk", "to_world": pn.Transform4f().translate([1, 2, 3]).scale(0.5)}
+    scene = pn.load_dict(d)
     params = pn.traverse(scene)
     pose = pn.Pose(params, "d.to_world")
     assert pose.keys == ["d.to_world"]
