@@ -202,7 +202,8 @@ fn left_jacobian(r: DVec3) -> DMat3 {
     let k = cross_matrix(r);
     let a2 = r.length_squared();
     if a2.sqrt() < SMALL_ANGLE {
-        // series of I + (1 − cos θ)/θ² K + (θ − sin θ)/θ³ K², error O(θ²·θ)
+        // series of I + (1 − cos θ)/θ² K + (θ − sin θ)/θ³ K²; the first
+        // omitted term is O(θ³)
         DMat3::IDENTITY + k * 0.5 + k * k * (1.0 / 6.0)
     } else {
         let rrt = DMat3::from_cols(r * r.x, r * r.y, r * r.z);
