@@ -12,6 +12,7 @@ use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedA
 use penumbra::diff::{gradient_seed as derive_gradient_seed, render_backward, render_forward};
 use penumbra::image::{self, Image};
 use penumbra::integrator::{render, Integrator, RenderOptions, Rendered};
+use penumbra::optim::pose::{normals_key, Pose, PoseLayout};
 use penumbra::params::Domain;
 use penumbra::scene::{Class, Scene};
 use penumbra::Error;
@@ -642,6 +643,98 @@ fn write_image(
     .map_err(to_py)
 }
 
+/// The library's pose layout named in Python: "points", "directions" or
+/// "matrix".
+fn pose_layout_of(name: &str) -> PyResult<PoseLayout> {
+    match name {
+        "points" => Ok(PoseLayout::Points),
+        "directions" => Ok(PoseLayout::Directions),
+        "matrix" => Ok(PoseLayout::Matrix),
+        _ => Err(PyValueError::new_err(format!(
+            "pose layout must be 'points', 'directions' or 'matrix', got '{name}'"
+        ))),
+    }
+}
+
+/// How a pose moves the parameter `key` of `shape` ("points" or
+/// "matrix"), and the vertex normals key that turns with mesh positions
+/// (`penumbra::optim::pose`); a ParamError for other parameters.
+#[pyfunction]
+fn pose_layout(key: &str, shape: Vec<usize>) -> PyResult<(&'static str, Option<String>)> {
+    let layout = PoseLayout::of_param(key, &shape).map_err(to_py)?;
+    let name = match layout {
+        PoseLayout::Matrix => "matrix",
+        _ => "points",
+    };
+    Ok((name, normals_key(key)))
+}
+
+fn pose_of(
+    layout: PoseLayout,
+    base: &[f32],
+    t: [f64; 3],
+    r: [f64; 3],
+    pivot: [f64; 3],
+) -> PyResult<Pose> {
+    Pose::check_len(layout, base.len()).map_err(PyValueError::new_err)?;
+    Ok(Pose {
+        translation: t.into(),
+        rotation: r.into(),
+        pivot: pivot.into(),
+    })
+}
+
+/// The default pivot of a pose of `base` (the centroid of points, the
+/// origin of a transform).
+#[pyfunction]
+fn pose_default_pivot(layout: &str, base: PyReadonlyArrayDyn<'_, f32>) -> PyResult<[f64; 3]> {
+    let layout = pose_layout_of(layout)?;
+    let base = to_vec(&base);
+    Pose::check_len(layout, base.len()).map_err(PyValueError::new_err)?;
+    Ok(Pose::default_pivot(layout, &base).to_array())
+}
+
+/// `base` moved by the pose (translation `t`, rotation vector `r` in
+/// radians, about `pivot`): a flat float32 array.
+#[pyfunction]
+fn pose_apply<'py>(
+    py: Python<'py>,
+    layout: &str,
+    base: PyReadonlyArrayDyn<'py, f32>,
+    t: [f64; 3],
+    r: [f64; 3],
+    pivot: [f64; 3],
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let layout = pose_layout_of(layout)?;
+    let base = to_vec(&base);
+    let pose = pose_of(layout, &base, t, r, pivot)?;
+    let n = base.len();
+    array(py, pose.apply(layout, &base), vec![n])
+}
+
+/// `(∂L/∂t, ∂L/∂r)` from `grad` = ∂L/∂values at the posed `base`.
+#[pyfunction]
+fn pose_backprop(
+    layout: &str,
+    base: PyReadonlyArrayDyn<'_, f32>,
+    grad: PyReadonlyArrayDyn<'_, f32>,
+    t: [f64; 3],
+    r: [f64; 3],
+    pivot: [f64; 3],
+) -> PyResult<([f64; 3], [f64; 3])> {
+    let layout = pose_layout_of(layout)?;
+    let (base, grad) = (to_vec(&base), to_vec(&grad));
+    if grad.len() != base.len() {
+        return Err(PyValueError::new_err(format!(
+            "the gradient has {} values, the parameter {}",
+            grad.len(),
+            base.len()
+        )));
+    }
+    let g = pose_of(layout, &base, t, r, pivot)?.backprop(layout, &base, &grad);
+    Ok((g.translation.to_array(), g.rotation.to_array()))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -655,6 +748,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_integrator, m)?)?;
     m.add_function(wrap_pyfunction!(gradient_seed, m)?)?;
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(pose_layout, m)?)?;
+    m.add_function(wrap_pyfunction!(pose_default_pivot, m)?)?;
+    m.add_function(wrap_pyfunction!(pose_apply, m)?)?;
+    m.add_function(wrap_pyfunction!(pose_backprop, m)?)?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

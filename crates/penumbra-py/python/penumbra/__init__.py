@@ -19,8 +19,10 @@ same ``spp``/``seed``: it is the exact derivative of that estimate.
 Mitsuba's ``seed_grad``): the same samples would bias the gradient of a
 non-linear loss. Pass ``seed_grad=seed`` for the exact derivative of the
 image rendered with ``seed``.
-Geometry parameters (flagged discontinuous) are refused by the derivative
-functions until boundary terms are implemented.
+Geometry parameters (flagged discontinuous) get the interior term of
+their derivative only, with a warning: the boundary terms of silhouettes
+and shadows are not estimated yet. :class:`Pose` maps a latent
+translation and rotation onto vertex positions or a ``to_world``.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 from . import _core, _dict
 from ._core import FileError, Integrator, ParamError, Scene, SceneError
 from .params import ParamInfo, SceneParameters, as_float_array
+from .pose import Pose
 from .transform import ScalarTransform4f, Transform4f
 from . import ad, losses  # noqa: E402
 
@@ -42,6 +45,7 @@ __all__ = [
     "Integrator",
     "ParamError",
     "ParamInfo",
+    "Pose",
     "ScalarTransform4f",
     "Scene",
     "SceneError",

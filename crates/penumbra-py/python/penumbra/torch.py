@@ -26,7 +26,7 @@ import torch
 
 from . import Scene, _adjoint, _integrator, _seed, _sensor, _spp, as_float_array, gradient_seed
 
-__all__ = ["render", "RenderFunction"]
+__all__ = ["render", "RenderFunction", "PoseFunction"]
 
 
 def _values(scene, key, t):
@@ -91,6 +91,33 @@ class RenderFunction(torch.autograd.Function):
             else:
                 out.append(None)
         return (None, None, None) + tuple(out)
+
+
+class PoseFunction(torch.autograd.Function):
+    """``PoseFunction.apply(pose, translation, rotation)``: the parameters a
+    :class:`penumbra.Pose` writes, as tensors (in ``pose.keys`` order),
+    whose backward pass is the pose's analytic chain rule
+    (:meth:`penumbra.Pose.backprop`); prefer ``pose.torch_params``."""
+
+    @staticmethod
+    def forward(ctx, pose, translation, rotation):
+        t = translation.detach().cpu().numpy()
+        r = rotation.detach().cpu().numpy()
+        ctx.pose, ctx.t, ctx.r = pose, t, r
+        ctx.meta = (translation.dtype, rotation.dtype)
+        values = pose.apply(t, r)
+        return tuple(torch.from_numpy(values[k]).to(translation.dtype) for k in pose.keys)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, *grads):
+        g = {k: d.detach().cpu().numpy() for k, d in zip(ctx.pose.keys, grads)}
+        d_t, d_r = ctx.pose.backprop(g, ctx.t, ctx.r)
+        return (
+            None,
+            torch.from_numpy(d_t).to(ctx.meta[0]),
+            torch.from_numpy(d_r).to(ctx.meta[1]),
+        )
 
 
 def render(

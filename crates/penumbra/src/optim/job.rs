@@ -5,10 +5,12 @@
 //! output folder: the target image(s) (`target.exr`, `target.png`; with
 //! several views `target_<v>.*`), the final render beside them
 //! (`final.exr`, `final.png`, with the target's samples per pixel),
-//! progress images (`iter_<i>.png`), the final parameters (`params.txt`,
-//! EXR for textures), the loss per iteration (`loss.csv`) and a plot of it
-//! (`loss.png`: raw values faint, their trend bold, log scale; a
-//! second panel with the parameter error when the truth is known).
+//! progress images (`iter_<i>.png`), the final parameters and poses
+//! (`params.txt`, EXR for textures), the loss per iteration (`loss.csv`,
+//! with the parameter and pose errors when the truth is known) and a plot
+//! of it (`loss.png`: raw values faint, their trend bold, log scale; more
+//! panels with the parameter error and the pose's translation and rotation
+//! errors when the truth is known).
 //!
 //! ```toml
 //! scene = "../scenes/cbox.xml"       # relative to the job file
@@ -26,21 +28,42 @@
 //! init = [0.4, 0.4, 0.4]             # a list, or one number for all elements
 //! lr = 0.02
 //!
+//! [[pose]]                           # optional: a rigid motion of a mesh
+//! key = "bunny.vertex_positions"     # or a [4, 4] "<id>.to_world"
+//! pivot = [0, 0, 0]                  # optional; default: the vertices'
+//!                                    # centroid, or the transform's origin
+//! init_translation = [0.1, 0, 0]     # optional start, world units
+//! init_rotation_deg = [0, 5, 0]      # optional start: rotation vector,
+//!                                    # degrees (axis × angle)
+//! lr_translation = 0.01              # Adam step ≈ lr per iteration
+//! lr_rotation_deg = 0.5              # in degrees
+//!
 //! [[view]]                           # optional: extra camera poses
 //! origin = [0, 1, 3]
 //! target = [0, 0, 0]
 //! up = [0, 1, 0]
 //! ```
+//!
+//! A job optimises `[[param]]` values directly and `[[pose]]`s through
+//! their latent translation and rotation ([`super::pose`]): `init` and
+//! `init_translation` / `init_rotation_deg` are where the optimisation
+//! starts, and the scene as loaded is the truth (the zero pose), against
+//! which errors are reported when the targets are rendered from it.
+//! A mesh's vertex normals turn with its positions. Poses get the interior
+//! term of the derivative only (no silhouette terms yet: see
+//! [`crate::diff::missing_boundary_terms_message`]).
 
+use super::pose::{rotation_matrix, PoseGrad, PosedParam};
 use super::{Loss, Method, Optimizer};
-use crate::diff::render_backward;
+use crate::diff::{render_backward, GradEntry, Gradients};
 use crate::error::{Error, Result};
 use crate::image::plot::{plot_curve, stack};
 use crate::image::{read_image, write_exr, write_png, Image};
 use crate::integrator::{render, RenderOptions};
 use crate::math::Transform;
+use crate::params::{Domain, ParamFlags, ParamStore};
 use crate::scene::Scene;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -60,8 +83,10 @@ pub struct JobFile {
     #[serde(default)]
     pub optimizer: OptimizerSpec,
     pub target: TargetSpec,
-    #[serde(rename = "param")]
+    #[serde(default, rename = "param")]
     pub params: Vec<ParamSpec>,
+    #[serde(default, rename = "pose")]
+    pub poses: Vec<PoseSpec>,
     #[serde(default, rename = "view")]
     pub views: Vec<ViewSpec>,
     #[serde(default)]
@@ -129,6 +154,21 @@ pub struct ParamSpec {
     pub lr: f32,
 }
 
+/// A `[[pose]]`: a latent translation and rotation of `key`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    pub key: String,
+    pub pivot: Option<[f32; 3]>,
+    #[serde(default)]
+    pub init_translation: [f32; 3],
+    /// Rotation vector (axis × angle) in degrees, as Mitsuba's `<rotate>`.
+    #[serde(default)]
+    pub init_rotation_deg: [f32; 3],
+    pub lr_translation: f32,
+    pub lr_rotation_deg: f32,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ViewSpec {
@@ -154,6 +194,13 @@ pub struct JobResult {
     /// Per parameter: (mean, max) absolute error against the values the
     /// scene was loaded with, when the targets were rendered from it.
     pub param_errors: Vec<(String, f64, f64)>,
+    /// Per iteration: the translation error |t − t_true| and the rotation
+    /// error (angle of R·R_trueᵀ, degrees), averaged over the poses, when
+    /// the targets were rendered from the scene.
+    pub pose_error_curve: Vec<(f64, f64)>,
+    /// Per pose: (key, translation error, rotation error in degrees) at
+    /// the end, when the targets were rendered from the scene.
+    pub pose_errors: Vec<(String, f64, f64)>,
     pub output: PathBuf,
 }
 
@@ -199,8 +246,11 @@ impl Job {
                 })
                 .collect::<Result<_>>()?;
         }
-        if spec.params.is_empty() {
-            return Err(Error::file(path, "the job names no [[param]] to optimise"));
+        if spec.params.is_empty() && spec.poses.is_empty() {
+            return Err(Error::file(
+                path,
+                "the job names no [[param]] or [[pose]] to optimise",
+            ));
         }
         if spec.iterations == 0 || spec.spp == 0 {
             return Err(Error::file(path, "iterations and spp must be at least 1"));
@@ -311,7 +361,8 @@ impl Job {
                 .collect::<Result<_>>()?
         };
 
-        // initial values
+        // initial values; the poses bind to the scene as loaded (the truth)
+        let mut poses = Poses::new(&spec.poses, &spec.params, &scene.params)?;
         for p in &spec.params {
             let id = scene.params.require(&p.key)?;
             let n = scene.params.data(id).len();
@@ -328,15 +379,24 @@ impl Job {
             };
             scene.params.set(&p.key, &init)?;
         }
+        poses.apply(&mut scene.params)?;
         scene.update()?;
 
-        let keys: Vec<&str> = spec.params.iter().map(|p| p.key.as_str()).collect();
+        let pose_keys: Vec<String> = poses.scene_keys().map(String::from).collect();
+        let keys: Vec<&str> = spec
+            .params
+            .iter()
+            .map(|p| p.key.as_str())
+            .chain(pose_keys.iter().map(String::as_str))
+            .collect();
         let mut opt = Optimizer::new(
             method,
             spec.params.iter().map(|p| (p.key.clone(), p.lr)).collect(),
         )?;
+        let mut pose_opt = Optimizer::new(method, poses.learning_rates.clone())?;
         let mut losses = Vec::with_capacity(spec.iterations as usize);
         let mut error_curve = Vec::new();
+        let mut pose_curve = Vec::new();
         let known_truth = spec.target.render_spp.is_some();
         let mean_error = |store: &crate::params::ParamStore| -> Result<f64> {
             let (mut sum, mut n) = (0.0f64, 0usize);
@@ -391,10 +451,23 @@ impl Job {
                 e.data.iter_mut().for_each(|x| *x /= n_views as f32);
             }
             opt.step(&mut scene.params, &g)?;
+            if !poses.bound.is_empty() {
+                let latent_grads = poses.gradients(&g)?;
+                pose_opt.step(&mut poses.latents, &latent_grads)?;
+                poses.apply(&mut scene.params)?;
+            }
             scene.update()?;
             losses.push(total);
-            if known_truth {
+            if known_truth && !spec.params.is_empty() {
                 error_curve.push(mean_error(&scene.params)?);
+            }
+            if known_truth && !poses.bound.is_empty() {
+                let errs = poses.errors();
+                let n = errs.len() as f64;
+                pose_curve.push((
+                    errs.iter().map(|e| e.0).sum::<f64>() / n,
+                    errs.iter().map(|e| e.1).sum::<f64>() / n,
+                ));
             }
             progress(it, total);
         }
@@ -412,19 +485,29 @@ impl Job {
             )?;
             write_view("final", v, &to_image(&img.data, img.width, img.height))?;
         }
+        let mut header = "iteration,loss,mean_abs_param_error".to_string();
+        if !poses.bound.is_empty() {
+            header += ",translation_error,rotation_error_deg";
+        }
         let csv: String = losses
             .iter()
             .enumerate()
-            .map(|(i, l)| match error_curve.get(i) {
-                Some(e) => format!("{i},{l:e},{e:e}\n"),
-                None => format!("{i},{l:e},\n"),
+            .map(|(i, l)| {
+                let mut row = match error_curve.get(i) {
+                    Some(e) => format!("{i},{l:e},{e:e}"),
+                    None => format!("{i},{l:e},"),
+                };
+                if !poses.bound.is_empty() {
+                    row += &match pose_curve.get(i) {
+                        Some((t, r)) => format!(",{t:e},{r:e}"),
+                        None => ",,".into(),
+                    };
+                }
+                row + "\n"
             })
             .collect();
-        std::fs::write(
-            out.join("loss.csv"),
-            format!("iteration,loss,mean_abs_param_error\n{csv}"),
-        )
-        .map_err(|e| Error::file(out.join("loss.csv"), e))?;
+        std::fs::write(out.join("loss.csv"), format!("{header}\n{csv}"))
+            .map_err(|e| Error::file(out.join("loss.csv"), e))?;
         let mut panels = vec![plot_curve(
             &losses,
             640,
@@ -438,6 +521,23 @@ impl Job {
                 640,
                 400,
                 "mean |param - truth|",
+                false,
+            ));
+        }
+        if !pose_curve.is_empty() {
+            let (t, r): (Vec<f64>, Vec<f64>) = pose_curve.iter().cloned().unzip();
+            panels.push(plot_curve(
+                &t,
+                640,
+                400,
+                "pose |translation - truth|",
+                false,
+            ));
+            panels.push(plot_curve(
+                &r,
+                640,
+                400,
+                "pose rotation error (degrees)",
                 false,
             ));
         }
@@ -489,14 +589,163 @@ impl Job {
                 if param.data.len() > 8 { ", …" } else { "" }
             );
         }
+        let mut pose_errors = Vec::new();
+        for (i, b) in poses.bound.iter().enumerate() {
+            let (t, r) = poses.latent(i);
+            let err = if known_truth {
+                let (et, er) = poses.errors()[i];
+                pose_errors.push((b.key.clone(), et, er));
+                format!(" (error vs the scene's pose: |translation| {et:.4}, rotation {er:.3}°)")
+            } else {
+                String::new()
+            };
+            let deg = r / DEG;
+            summary += &format!(
+                "{} pose: translation = [{:.4}, {:.4}, {:.4}], rotation_deg = [{:.3}, {:.3}, \
+                 {:.3}], pivot = [{:.4}, {:.4}, {:.4}]{err}\n",
+                b.key, t.x, t.y, t.z, deg.x, deg.y, deg.z, b.pivot.x, b.pivot.y, b.pivot.z
+            );
+        }
         std::fs::write(out.join("params.txt"), &summary)
             .map_err(|e| Error::file(out.join("params.txt"), e))?;
         Ok(JobResult {
             losses,
             param_error_curve: error_curve,
             param_errors,
+            pose_error_curve: pose_curve,
+            pose_errors,
             output: out,
         })
+    }
+}
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// The job's `[[pose]]`s bound to the scene, with their latents in a store
+/// of their own (`<key>.pose.translation`, `<key>.pose.rotation_deg`) so
+/// that an [`Optimizer`] steps them like parameters; the rotation latent
+/// is in degrees so that `lr_rotation_deg` is the step in degrees.
+struct Poses {
+    bound: Vec<PosedParam>,
+    latents: ParamStore,
+    learning_rates: Vec<(String, f32)>,
+}
+
+fn latent_keys(key: &str) -> [String; 2] {
+    [
+        format!("{key}.pose.translation"),
+        format!("{key}.pose.rotation_deg"),
+    ]
+}
+
+impl Poses {
+    fn new(specs: &[PoseSpec], params: &[ParamSpec], store: &ParamStore) -> Result<Poses> {
+        let mut poses = Poses {
+            bound: Vec::new(),
+            latents: ParamStore::new(),
+            learning_rates: Vec::new(),
+        };
+        let mut taken: Vec<String> = params.iter().map(|p| p.key.clone()).collect();
+        for s in specs {
+            let b = PosedParam::new(store, &s.key, s.pivot.map(|p| Vec3::from(p).as_dvec3()))?;
+            for k in b.keys() {
+                if taken.iter().any(|t| t == k) {
+                    return Err(Error::Param {
+                        key: s.key.clone(),
+                        msg: format!(
+                            "this [[pose]] writes '{k}', which another [[param]] or [[pose]] \
+                             of the job optimises too"
+                        ),
+                    });
+                }
+            }
+            taken.extend(b.keys().into_iter().map(String::from));
+            let [kt, kr] = latent_keys(&s.key);
+            let init = [
+                (kt, s.init_translation, s.lr_translation),
+                (kr, s.init_rotation_deg, s.lr_rotation_deg),
+            ];
+            for (k, v, lr) in init {
+                let bad = v.iter().find(|x| !x.is_finite());
+                if let Some(x) = bad {
+                    return Err(Error::Param {
+                        key: s.key.clone(),
+                        msg: format!("the initial pose must be finite, found {x}"),
+                    });
+                }
+                poses.latents.add(
+                    k.clone(),
+                    v.to_vec(),
+                    vec![3],
+                    ParamFlags::DIFFERENTIABLE,
+                    Domain::Finite,
+                )?;
+                poses.learning_rates.push((k, lr));
+            }
+            poses.bound.push(b);
+        }
+        Ok(poses)
+    }
+
+    /// Translation and rotation vector (radians) of pose `i`.
+    fn latent(&self, i: usize) -> (DVec3, DVec3) {
+        let [kt, kr] = latent_keys(&self.bound[i].key);
+        let get = |k: &str| {
+            let d = self
+                .latents
+                .data(self.latents.id(k).expect("registered in new"));
+            Vec3::from_slice(d).as_dvec3()
+        };
+        (get(&kt), get(&kr) * DEG)
+    }
+
+    /// The scene parameters the poses write, whose gradients they need.
+    fn scene_keys(&self) -> impl Iterator<Item = &str> {
+        self.bound.iter().flat_map(|b| b.keys())
+    }
+
+    /// Writes the posed values into the scene's store.
+    fn apply(&self, store: &mut ParamStore) -> Result<()> {
+        for (i, b) in self.bound.iter().enumerate() {
+            let (t, r) = self.latent(i);
+            b.apply(store, t, r)?;
+        }
+        Ok(())
+    }
+
+    /// The latents' gradients from the scene parameters' `grads`.
+    fn gradients(&self, grads: &Gradients) -> Result<Gradients> {
+        let mut entries = Vec::new();
+        for (i, b) in self.bound.iter().enumerate() {
+            let (t, r) = self.latent(i);
+            let g: PoseGrad = b.backprop(grads, t, r)?;
+            let [kt, kr] = latent_keys(&b.key);
+            // the rotation latent is in degrees: ∂L/∂deg = ∂L/∂rad · π/180
+            for (key, v) in [(kt, g.translation), (kr, g.rotation * DEG)] {
+                entries.push(GradEntry {
+                    key,
+                    shape: vec![3],
+                    data: v.as_vec3().to_array().to_vec(),
+                });
+            }
+        }
+        Ok(Gradients {
+            entries,
+            ..Default::default()
+        })
+    }
+
+    /// Per pose: |translation| and the rotation angle in degrees, i.e. the
+    /// errors against the scene as loaded (the zero pose).
+    fn errors(&self) -> Vec<(f64, f64)> {
+        (0..self.bound.len())
+            .map(|i| {
+                let (t, r) = self.latent(i);
+                let m = rotation_matrix(r);
+                let cos = (m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0;
+                (t.length(), cos.clamp(-1.0, 1.0).acos() / DEG)
+            })
+            .collect()
     }
 }
 
