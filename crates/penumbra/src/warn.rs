@@ -6,20 +6,34 @@
 //! into `warnings.warn`. Each warning is emitted once per occasion, with
 //! counts, never once per sample.
 
-use std::sync::{Arc, RwLock};
+use std::collections::HashSet;
+use std::sync::{Arc, Mutex, RwLock};
 
 /// Receives one warning message (no trailing newline).
 pub type WarningSink = dyn Fn(&str) + Send + Sync;
 
 static SINK: RwLock<Option<Arc<WarningSink>>> = RwLock::new(None);
 
-/// Sends a warning to the installed sink (default: `warning: …` on stderr).
+/// Messages the default sink has printed: an optimisation loop repeats the
+/// same call, and one line per distinct warning is enough.
+static PRINTED: Mutex<Option<HashSet<String>>> = Mutex::new(None);
+
+/// Sends a warning to the installed sink (default: `warning: …` on stderr,
+/// each distinct message once per process).
 pub fn warn(msg: impl AsRef<str>) {
     let msg = msg.as_ref();
     let sink = SINK.read().ok().and_then(|s| s.clone());
     match sink {
         Some(sink) => sink(msg),
-        None => eprintln!("warning: {msg}"),
+        None => {
+            let first = PRINTED
+                .lock()
+                .map(|mut p| p.get_or_insert_with(HashSet::new).insert(msg.to_string()))
+                .unwrap_or(true);
+            if first {
+                eprintln!("warning: {msg}");
+            }
+        }
     }
 }
 
