@@ -19,17 +19,17 @@ pub fn render_forward(
     opts: &RenderOptions,
 ) -> Result<Rendered> {
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    warn_missing_boundary_terms(scene, &keys)?;
+    let geometry_moves = warn_missing_boundary_terms(scene, &keys)?;
     scene.params.clear_tangents();
     for (key, t) in tangents {
         scene.params.set_tangent(key, t)?;
     }
-    let result = derivative_image(scene, opts);
+    let result = derivative_image(scene, opts, geometry_moves);
     scene.params.clear_tangents();
     result
 }
 
-fn derivative_image(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
+fn derivative_image(scene: &Scene, opts: &RenderOptions, geometry_moves: bool) -> Result<Rendered> {
     let integrator = &scene.integrator;
     if let Integrator::Aov(_) = integrator {
         return Err(Error::Invalid(
@@ -38,7 +38,7 @@ fn derivative_image(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
     }
     let (block, non_finite_samples) =
         render_samples(scene, opts, 3, "forward mode", |cs, rng, out| {
-            if let Some(l) = integrator.radiance::<Dual>(scene, cs, rng) {
+            if let Some(l) = integrator.radiance::<Dual>(scene, cs, rng, geometry_moves) {
                 out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
             }
         })?;

@@ -38,7 +38,11 @@ pub fn gradient_seed(seed: u64) -> u64 {
 /// biased wherever such an edge moves. Not an error: the interior term is
 /// exact in scenes where no edge moves, and is what users optimise with
 /// today; never silent.
-pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<()> {
+///
+/// Returns whether any of them moves geometry or the camera (the
+/// integrators then re-evaluate paths in a parameterisation that moves
+/// with it, see `crate::integrator::scatter`).
+pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<bool> {
     let mut moving = Vec::new();
     for key in keys {
         let id = scene.params.require(key)?;
@@ -49,7 +53,7 @@ pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Resul
     if !moving.is_empty() {
         crate::warn(missing_boundary_terms_message(&moving));
     }
-    Ok(())
+    Ok(!moving.is_empty())
 }
 
 /// The warning of [`warn_missing_boundary_terms`].

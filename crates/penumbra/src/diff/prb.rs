@@ -118,9 +118,10 @@ pub fn render_backward(
             "the image gradient has a non-finite value at index {i}"
         )));
     }
+    let mut geometry_moves = false;
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            warn_missing_boundary_terms(scene, keys)?;
+            geometry_moves = warn_missing_boundary_terms(scene, keys)?;
             keys.iter()
                 .map(|k| {
                     let id = scene.params.require(k)?;
@@ -142,7 +143,7 @@ pub fn render_backward(
             .collect(),
     };
     scene.params.set_grad_enabled(&ids);
-    let result = backward_pass(scene, &d_image, opts);
+    let result = backward_pass(scene, &d_image, opts, geometry_moves);
     scene.params.set_grad_enabled(&[]);
     let (sums, non_finite_samples) = result?;
     Ok(Gradients {
@@ -165,6 +166,7 @@ fn backward_pass(
     scene: &Scene,
     d_image: &[f32],
     opts: &RenderOptions,
+    geometry_moves: bool,
 ) -> Result<(Vec<Vec<f64>>, usize)> {
     let layout = SampleLayout::new(scene, opts)?;
     layout.check_memory(scene, opts, 3, true)?;
@@ -203,7 +205,7 @@ fn backward_pass(
             clear_tape();
             let l = scene
                 .integrator
-                .radiance::<Var>(scene, cs, rng)
+                .radiance::<Var>(scene, cs, rng, geometry_moves)
                 .expect("path and direct integrators estimate radiance");
             if !l.val().is_finite() {
                 non_finite += 1;

@@ -1,7 +1,7 @@
 //! Mitsuba's `area` emitter: a shape that emits radiance from the side its
 //! normal points to.
 
-use super::{emission_prop, DirectionSample, EmitterSample, EmitterT};
+use super::{emission_prop, surface_si, DirectionSample, EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
@@ -43,40 +43,41 @@ impl Area {
         &self,
         store: &ParamStore,
         ps: &PositionSample,
-        mut y: SurfaceInteraction<R>,
+        y: SurfaceInteraction<R>,
         ref_p: V3<R>,
     ) -> Option<EmitterSample<R>> {
-        let to = ps.p - ref_p.val();
+        let to = y.p - ref_p;
         let dist2 = to.length_squared();
-        if !(dist2 > 0.0) || !(ps.pdf > 0.0) {
+        if !(dist2.val() > 0.0) || !(ps.pdf > 0.0) {
             return None;
         }
         let dist = dist2.sqrt();
         let d = to / dist;
         // cosine at the emitter between its normal and the direction to ref_p
-        let cos_e = -d.dot(ps.n);
-        if !(cos_e > 0.0) {
+        let cos_e = -d.dot(y.n);
+        if !(cos_e.val() > 0.0) {
             return None;
         }
-        let pdf = ps.pdf * dist2 / cos_e;
-        let to_r = y.p - ref_p;
-        let dist2_r = to_r.length_squared();
-        let d_r = to_r / dist2_r.sqrt();
-        y.set_wi(-d_r);
-        let jacobian = y.area_scale * -d_r.dot(y.n) / dist2_r;
+        let pdf = ps.pdf * dist2.val() / cos_e.val();
+        let jacobian = if R::DIFFERENTIABLE {
+            let j = y.area_scale * cos_e / dist2;
+            j / j.val()
+        } else {
+            R::cst(1.0)
+        };
         let l = self.radiance.eval(store, &y);
         let ds = DirectionSample {
             p: ps.p,
             n: ps.n,
-            d,
-            dist,
+            d: d.val(),
+            dist: dist.val(),
             pdf,
             delta: false,
         };
         Some(EmitterSample {
             ds,
-            d: d_r,
-            weight: l * (jacobian / (jacobian.val() * pdf)),
+            d,
+            weight: l * (jacobian / pdf),
         })
     }
 
@@ -108,7 +109,11 @@ impl EmitterT for Area {
             prim: ps.prim,
             uv: ps.local,
         };
-        let y = shape.point_at::<R>(store, &hit, ps.p);
+        let y = if shape.moves::<R>(store) {
+            shape.point_at::<R>(store, &hit, ps.p)
+        } else {
+            surface_si(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim)
+        };
         self.sample_from_position(store, &ps, y, ref_p)
     }
 

@@ -123,6 +123,17 @@ impl Shape {
         }
     }
 
+    /// Whether reads of this shape's surface carry derivatives in `R` (a
+    /// parameter that moves it is tracked): if not, its points are
+    /// constants.
+    pub fn moves<R: Real>(&self, store: &ParamStore) -> bool {
+        match self {
+            Shape::Mesh(m) => R::tracks(store, m.positions),
+            Shape::Sphere(s) => R::tracks(store, s.center) || R::tracks(store, s.radius),
+            Shape::Disk(d) => R::tracks(store, d.to_world),
+        }
+    }
+
     /// Refreshes derived data after the parameters `changed` were updated
     /// (areas, sampling tables, recomputed vertex normals). Call
     /// [`crate::geometry::Accel::update`] afterwards if any geometry

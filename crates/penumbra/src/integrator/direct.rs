@@ -39,9 +39,10 @@ impl DirectIntegrator {
         scene: &Scene,
         cs: &CameraSample,
         rng: &mut SampleStream,
+        geometry_moves: bool,
     ) -> Spectrum<R> {
         let store = &scene.params;
-        let camera_ray = cs.ray::<R>(store);
+        let camera_ray = cs.ray_if::<R>(store, geometry_moves);
         let ray = camera_ray.val();
         let Some(hit) = scene.intersect(&ray) else {
             return match scene.environment {
@@ -82,7 +83,7 @@ impl DirectIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 continue;
             };
-            let b = scatter(scene, bsdf, &si, &bs);
+            let b = scatter(scene, bsdf, &si, &bs, geometry_moves);
             let d = b.ray.d;
             let (le, em_pdf) = match (b.hit, b.next) {
                 (Some(h2), Some(si2)) => match scene.shape_emitter(h2.shape) {

@@ -73,23 +73,28 @@ impl Integrator {
             return a.sample(scene, cs, rng, out);
         }
         let rgb = self
-            .radiance::<f32>(scene, cs, rng)
+            .radiance::<f32>(scene, cs, rng, false)
             .expect("path and direct integrators estimate radiance");
         out[..3].copy_from_slice(&rgb.val().to_array());
     }
 
-    /// The radiance estimate along `ray` in `R` (primal for f32,
-    /// derivatives for dual numbers); `None` for the AOV integrator, which
-    /// estimates no radiance of its own.
+    /// The radiance estimate through camera sample `cs` in `R` (primal for
+    /// f32, derivatives for dual numbers and recorded variables); `None` for
+    /// the AOV integrator, which estimates no radiance of its own.
+    /// `geometry_moves`: derivatives are taken with respect to parameters
+    /// that move surfaces or the camera, so the path is re-evaluated in the
+    /// parameterisation of [`scatter`]; otherwise nothing moves and the
+    /// sampled weights are used as they are.
     pub fn radiance<R: Real>(
         &self,
         scene: &Scene,
         cs: &CameraSample,
         rng: &mut SampleStream,
+        geometry_moves: bool,
     ) -> Option<Spectrum<R>> {
         match self {
-            Integrator::Path(p) => Some(p.sample::<R>(scene, cs, rng)),
-            Integrator::Direct(d) => Some(d.sample::<R>(scene, cs, rng)),
+            Integrator::Path(p) => Some(p.sample::<R>(scene, cs, rng, geometry_moves)),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, cs, rng, geometry_moves)),
             Integrator::Aov(_) => None,
         }
     }
@@ -126,17 +131,22 @@ pub(crate) struct Bounce<R> {
 /// - after a delta lobe, the direction is a function of `wi` and the
 ///   normal: the ray leaves the attached point along the attached
 ///   direction, and the next vertex slides along it.
+///
+/// When no geometry moves (`geometry_moves` false: material and emitter
+/// parameters only) both forms reduce to the sample's own weight and the
+/// point where the ray hits, which is what this returns then.
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
     bsdf: &Bsdf,
     si: &SurfaceInteraction<R>,
     bs: &BsdfSample<R>,
+    geometry_moves: bool,
 ) -> Bounce<R> {
     let delta = bs.lobe.has(BsdfFlags::DELTA);
     let d = si.to_world(bs.wo).normalize();
     let ray = si.spawn_ray(d.val());
     let hit = scene.intersect(&ray);
-    if delta || !R::DIFFERENTIABLE {
+    if delta || !geometry_moves || !R::DIFFERENTIABLE {
         let dray = DiffRay {
             o: si.p,
             d,

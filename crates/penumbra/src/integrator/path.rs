@@ -45,9 +45,10 @@ impl PathIntegrator {
         scene: &Scene,
         cs: &CameraSample,
         rng: &mut SampleStream,
+        geometry_moves: bool,
     ) -> Spectrum<R> {
         let store = &scene.params;
-        let camera_ray = cs.ray::<R>(store);
+        let camera_ray = cs.ray_if::<R>(store, geometry_moves);
         let mut result = Spectrum::<R>::zero();
         let mut throughput = Spectrum::<R>::splat(R::cst(1.0));
         let mut eta = 1.0f32;
@@ -129,7 +130,7 @@ impl PathIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 return result;
             };
-            let bounce = scatter(scene, bsdf, &si, &bs);
+            let bounce = scatter(scene, bsdf, &si, &bs, geometry_moves);
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;

@@ -42,6 +42,17 @@ pub struct CameraSample<'a> {
 }
 
 impl CameraSample<'_> {
+    /// The camera ray in `R` if geometry or the camera moves, else its
+    /// primal value as a constant (cheaper: nothing to differentiate).
+    #[inline]
+    pub fn ray_if<R: Real>(&self, store: &ParamStore, geometry_moves: bool) -> DiffRay<R> {
+        if geometry_moves {
+            self.ray(store)
+        } else {
+            DiffRay::cst(&self.ray::<f32>(store).val())
+        }
+    }
+
     /// The camera ray of this sample, in `R`.
     #[inline]
     pub fn ray<R: Real>(&self, store: &ParamStore) -> DiffRay<R> {
