@@ -503,9 +503,82 @@ fn forward_and_reverse_mode_agree_for_every_geometry_parameter_kind() {
         assert_forward_matches_reverse(key, &sphere, key);
     }
     let camera = camera_scene("perspective", "");
-    for key in ["camera.to_world", "camera.x_fov", "plane.vertex_positions"] {
+    for key in ["camera.to_world", "camera.x_fov", "plane.to_world"] {
         assert_forward_matches_reverse(key, &camera, key);
     }
+}
+
+/// The tangent of a row-major `to_world` M turning about its own (local)
+/// axis `axis`: M · G, G the generator of rotations about that axis.
+fn turn_about_local_axis(m: &[f32], axis: usize) -> Vec<f32> {
+    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut g = [[0.0f32; 3]; 3];
+    g[b][a] = 1.0;
+    g[a][b] = -1.0;
+    let mut t = vec![0.0f32; 16];
+    for r in 0..3 {
+        for c in 0..3 {
+            t[4 * r + c] = (0..3).map(|k| m[4 * r + k] * g[k][c]).sum();
+        }
+    }
+    t
+}
+
+/// The tangent of a row-major `to_world` translating by `v`.
+fn moved(v: [f32; 3]) -> Vec<f32> {
+    let mut t = vec![0.0f32; 16];
+    (t[3], t[7], t[11]) = (v[0], v[1], v[2]);
+    t
+}
+
+#[test]
+fn mesh_to_world() {
+    let xml = area_light_scene(EMITTER_SAMPLING, CONSTANT_RADIANCE);
+    let key = "plane.to_world";
+    check(
+        "plane to_world moved",
+        &xml,
+        key,
+        |_| moved([0.3, 0.2, 1.0]),
+        1e-3,
+    );
+    check(
+        "plane to_world turned",
+        &xml,
+        key,
+        |m| turn_about_local_axis(m, 0),
+        1e-4,
+    );
+    let key = "light.to_world";
+    check(
+        "light to_world turned",
+        &xml,
+        key,
+        |m| turn_about_local_axis(m, 1),
+        1e-3,
+    );
+    // a mesh with vertex normals: they turn with the transform
+    let plane = PLANE
+        .replace(
+            r#"<shape type="rectangle" id="plane">"#,
+            r#"<shape type="ply" id="plane"><string name="filename" value="meshes/plane_uv.ply"/>"#,
+        )
+        .replace(
+            r#"<scale value="10"/>"#,
+            r#"<scale value="10"/><rotate x="1" angle="90"/>"#,
+        );
+    let xml = scene_xml(
+        EMITTER_SAMPLING,
+        &oblique_sensor(),
+        &format!("{plane}{}", light(CONSTANT_RADIANCE)),
+    );
+    check(
+        "ply to_world turned",
+        &xml,
+        "plane.to_world",
+        |m| turn_about_local_axis(m, 0),
+        1e-4,
+    );
 }
 
 /// A camera (id `camera`) of type `kind` at (0, −1.5, 3) looking at the
@@ -540,17 +613,7 @@ fn camera_moved_in_front_of_a_plane_that_fills_the_view() {
         (t[3], t[7], t[11]) = (0.7, 0.3, -0.5);
         t
     };
-    let turn = |m: &[f32]| {
-        // M · G with G the generator of rotations about local y
-        let g = [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]];
-        let mut t = vec![0.0f32; 16];
-        for r in 0..3 {
-            for c in 0..3 {
-                t[4 * r + c] = (0..3).map(|k| m[4 * r + k] * g[k][c]).sum();
-            }
-        }
-        t
-    };
+    let turn = |m: &[f32]| turn_about_local_axis(m, 1);
     let perspective = camera_scene("perspective", r#"<float name="fov" value="40"/>"#);
     check(
         "perspective moved",

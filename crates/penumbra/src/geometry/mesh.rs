@@ -77,6 +77,12 @@ pub struct Mesh {
     pub positions: ParamId,
     pub normals: Option<ParamId>,
     pub texcoords: Option<ParamId>,
+    /// `<key>.to_world` (`[4, 4]`, row-major): the transform the vertices
+    /// were placed by; setting it moves them (and the normals) by the
+    /// change, and its derivative moves them likewise.
+    pub to_world_id: ParamId,
+    /// The transform the stored vertices are placed by now.
+    to_world: Transform,
     pub face_normals: bool,
     pub flip_normals: bool,
     /// What was skipped at load (reported once, as a warning).
@@ -227,6 +233,13 @@ impl Mesh {
             )?),
             None => None,
         };
+        let to_world_id = store.add(
+            format!("{key}.to_world"),
+            to_world.m.transpose().to_cols_array().to_vec(),
+            vec![4, 4],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )?;
         let texcoords = match &data.texcoords {
             Some(uv) => Some(store.add(
                 format!("{key}.vertex_texcoords"),
@@ -243,6 +256,8 @@ impl Mesh {
             VertexFaces::default()
         };
         let mut mesh = Mesh {
+            to_world_id,
+            to_world: *to_world,
             vertex_faces,
             plugin,
             key: key.to_string(),
@@ -332,11 +347,15 @@ impl Mesh {
         store: &mut ParamStore,
         changed: &[ParamId],
     ) -> Result<()> {
-        if !changed.contains(&self.positions) {
+        let transformed = changed.contains(&self.to_world_id);
+        if transformed {
+            self.apply_to_world_change(store)?;
+        }
+        if !changed.contains(&self.positions) && !transformed {
             return Ok(());
         }
         if let Some(nid) = self.normals {
-            if !changed.contains(&nid) {
+            if !changed.contains(&nid) && !transformed {
                 let d = store.data(self.positions);
                 let pos: Vec<Vec3> = d.chunks_exact(3).map(Vec3::from_slice).collect();
                 let n = vertex_normals(&pos, &self.faces);
@@ -348,6 +367,57 @@ impl Mesh {
             }
         }
         self.update_areas(store)
+    }
+
+    /// Moves the vertices (and normals) by the change from the transform
+    /// they were placed by to the new value of `<key>.to_world`.
+    fn apply_to_world_change(&mut self, store: &mut ParamStore) -> Result<()> {
+        let key = store.get(self.to_world_id).key.clone();
+        let rows = store.data(self.to_world_id);
+        let new = Transform::new(glam::Mat4::from_cols_slice(rows).transpose())
+            .filter(|t| t.m.determinant().abs() > 0.0)
+            .ok_or_else(|| Error::Param {
+                key: key.clone(),
+                msg: "the transform is not invertible".into(),
+            })?;
+        let change = new.after(&self.to_world.inverse());
+        let moved: Vec<f32> = store
+            .data(self.positions)
+            .chunks_exact(3)
+            .flat_map(|p| change.point(Vec3::from_slice(p)).to_array())
+            .collect();
+        let positions_key = store.get(self.positions).key.clone();
+        store.set(&positions_key, &moved)?;
+        if let Some(nid) = self.normals {
+            let turned: Vec<f32> = store
+                .data(nid)
+                .chunks_exact(3)
+                .flat_map(|n| {
+                    change
+                        .normal(Vec3::from_slice(n))
+                        .normalize_or_zero()
+                        .to_array()
+                })
+                .collect();
+            let normals_key = store.get(nid).key.clone();
+            store.set(&normals_key, &turned)?;
+        }
+        self.to_world = new;
+        Ok(())
+    }
+
+    /// The change of `to_world` along its tangent (rows 0–2, value zero),
+    /// if reads of it carry derivatives in `R`.
+    fn to_world_tangent<R: Real>(&self, store: &ParamStore) -> Option<[[R; 4]; 3]> {
+        if !R::tracks(store, self.to_world_id) {
+            return None;
+        }
+        Some(std::array::from_fn(|r| {
+            std::array::from_fn(|c| {
+                let i = 4 * r + c;
+                store.read::<R>(self.to_world_id, i) - store.value(self.to_world_id, i)
+            })
+        }))
     }
 
     /// Geometric normal of triangle `f` (unit, flipped if `flip_normals`;
@@ -367,7 +437,19 @@ impl Mesh {
     fn triangle_r<R: Real>(&self, store: &ParamStore, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
         let [i0, i1, i2] = self.faces[prim as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
-        (idx, idx.map(|i| store.read3(self.positions, i)))
+        let ps = idx.map(|i| store.read3(self.positions, i));
+        match self.to_world_tangent::<R>(store) {
+            // p = M(θ) q with q = M⁻¹ p the object-space point
+            Some(dm) => (
+                idx,
+                ps.map(|p| {
+                    let q = self.to_world.inv.transform_point3(p.val());
+                    let row = |r: [R; 4]| r[0] * q.x + r[1] * q.y + r[2] * q.z + r[3];
+                    p + V3::new(row(dm[0]), row(dm[1]), row(dm[2]))
+                }),
+            ),
+            None => (idx, ps),
+        }
     }
 
     /// Differentiable re-evaluation of a ray hit on triangle `hit.prim`,
@@ -475,14 +557,27 @@ impl Mesh {
                 // (unless the normals are set too), their derivative follows
                 // the positions' unless they carry their own.
                 let follow = R::tracks(store, self.positions) && !R::tracks(store, nid);
+                let dm = self.to_world_tangent::<R>(store);
                 let normal = |i: usize| -> V3<R> {
-                    let n: V3<R> = store.read3(nid, i);
+                    let mut n: V3<R> = store.read3(nid, i);
                     if follow {
                         let d = self.derived_normal::<R>(store, i);
-                        n + (d - V3::cst(d.val()))
-                    } else {
-                        n
+                        n += d - V3::cst(d.val());
                     }
+                    // n ∝ A⁻ᵀ n_obj for the linear part A of to_world:
+                    // dn = −A⁻ᵀ dAᵀ n
+                    if let Some(dm) = &dm {
+                        let nv = n.val();
+                        let da_t_n = V3::new(
+                            dm[0][0] * nv.x + dm[1][0] * nv.y + dm[2][0] * nv.z,
+                            dm[0][1] * nv.x + dm[1][1] * nv.y + dm[2][1] * nv.z,
+                            dm[0][2] * nv.x + dm[1][2] * nv.y + dm[2][2] * nv.z,
+                        );
+                        let inv_t = glam::Mat3::from_mat4(self.to_world.inv).transpose();
+                        let c = |r: usize| V3::cst(inv_t.row(r));
+                        n -= V3::new(c(0).dot(da_t_n), c(1).dot(da_t_n), c(2).dot(da_t_n));
+                    }
+                    n
                 };
                 let (n0, n1, n2) = (normal(i0), normal(i1), normal(i2));
                 let s = n0 * b0 + n1 * b1 + n2 * b2;

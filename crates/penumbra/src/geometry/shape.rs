@@ -117,7 +117,7 @@ impl Shape {
     /// scene to know when the acceleration structure needs an update).
     pub fn geometry_params(&self) -> Vec<ParamId> {
         match self {
-            Shape::Mesh(m) => vec![m.positions],
+            Shape::Mesh(m) => vec![m.positions, m.to_world_id],
             Shape::Sphere(s) => vec![s.center, s.radius],
             Shape::Disk(d) => vec![d.to_world],
         }
@@ -128,7 +128,7 @@ impl Shape {
     /// constants.
     pub fn moves<R: Real>(&self, store: &ParamStore) -> bool {
         match self {
-            Shape::Mesh(m) => R::tracks(store, m.positions),
+            Shape::Mesh(m) => R::tracks(store, m.positions) || R::tracks(store, m.to_world_id),
             Shape::Sphere(s) => R::tracks(store, s.center) || R::tracks(store, s.radius),
             Shape::Disk(d) => R::tracks(store, d.to_world),
         }
