@@ -422,6 +422,21 @@ fn sphere_centre_and_radius() {
         1e-3,
     );
     check("sphere radius", &xml, "ball.radius", |_| vec![1.0], 1e-3);
+    let key = "ball.to_world";
+    check(
+        "sphere to_world moved",
+        &xml,
+        key,
+        |_| moved([0.5, -0.5, 1.0]),
+        1e-3,
+    );
+    check(
+        "sphere to_world turned",
+        &xml,
+        key,
+        |m| turn_about_local_axis(m, 2),
+        1e-4,
+    );
     let xml = inside_sphere_xml(&path_integrator(4));
     let centre = |_: &[f32]| vec![1.0, 0.5, -0.5];
     check_in_expectation("sphere centre (paths)", &xml, "ball.center", centre);
@@ -499,7 +514,7 @@ fn forward_and_reverse_mode_agree_for_every_geometry_parameter_kind() {
         assert_forward_matches_reverse(key, &area, key);
     }
     let sphere = inside_sphere_xml(&path_integrator(4));
-    for key in ["ball.center", "ball.radius"] {
+    for key in ["ball.center", "ball.radius", "ball.to_world"] {
         assert_forward_matches_reverse(key, &sphere, key);
     }
     let camera = camera_scene("perspective", "");

@@ -118,7 +118,7 @@ impl Shape {
     pub fn geometry_params(&self) -> Vec<ParamId> {
         match self {
             Shape::Mesh(m) => vec![m.positions, m.to_world_id],
-            Shape::Sphere(s) => vec![s.center, s.radius],
+            Shape::Sphere(s) => vec![s.center, s.radius, s.to_world],
             Shape::Disk(d) => vec![d.to_world],
         }
     }
@@ -129,7 +129,11 @@ impl Shape {
     pub fn moves<R: Real>(&self, store: &ParamStore) -> bool {
         match self {
             Shape::Mesh(m) => R::tracks(store, m.positions) || R::tracks(store, m.to_world_id),
-            Shape::Sphere(s) => R::tracks(store, s.center) || R::tracks(store, s.radius),
+            Shape::Sphere(s) => {
+                R::tracks(store, s.center)
+                    || R::tracks(store, s.radius)
+                    || R::tracks(store, s.to_world)
+            }
             Shape::Disk(d) => R::tracks(store, d.to_world),
         }
     }
@@ -146,7 +150,7 @@ impl Shape {
         match self {
             Shape::Mesh(m) => m.parameters_changed(store, changed),
             Shape::Sphere(s) => {
-                s.parameters_changed(store);
+                s.parameters_changed(store, changed)?;
                 Ok(())
             }
             Shape::Disk(d) => d.parameters_changed(store),

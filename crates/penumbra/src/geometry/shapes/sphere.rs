@@ -3,20 +3,23 @@
 //! sphere is `to_world · translate(center) · scale(radius)` applied to the
 //! unit sphere, as in Mitsuba 3), `flip_normals` (false).
 //!
-//! Parameters in the store: `<key>.center` (`[3]`, world space) and
-//! `<key>.radius` (`[1]`, > 0), both geometry. The rotation part of
-//! `to_world` is a constant that orients the uv parametrisation:
-//! uv = (φ / 2π, θ / π) of the hit point in the sphere's local frame
-//! (Mitsuba's convention), normal outward (inward with `flip_normals`).
+//! Parameters in the store, all geometry: `<key>.center` (`[3]`, world
+//! space), `<key>.radius` (`[1]`, > 0) and `<key>.to_world` (`[4, 4]`,
+//! row-major: translate(center) · rotation · scale(radius), Mitsuba's
+//! parameter of the sphere). Setting one updates the others; a `to_world`
+//! that is not a similarity is an error. The rotation orients the uv
+//! parametrisation: uv = (φ / 2π, θ / π) of the hit point in the sphere's
+//! local frame (Mitsuba's convention), normal outward (inward with
+//! `flip_normals`).
 
 use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
 use crate::scene::{LoadContext, Node};
-use glam::{Mat3, Vec2, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// An analytic sphere.
@@ -25,6 +28,7 @@ pub struct Sphere {
     pub key: String,
     pub center: ParamId,
     pub radius: ParamId,
+    pub to_world: ParamId,
     /// Local-to-world rotation (orthonormal columns): orients uv.
     pub rot: Mat3,
     pub flip_normals: bool,
@@ -38,27 +42,9 @@ impl Sphere {
         let radius = node.float_checked("radius", 1.0, true)?;
         let to_world = node.transform("to_world")?;
         let flip_normals = node.bool("flip_normals", false)?;
-        let m = to_world.m;
-        let c = to_world.point(center);
-        let cols = [
-            m.transform_vector3(Vec3::X) * radius,
-            m.transform_vector3(Vec3::Y) * radius,
-            m.transform_vector3(Vec3::Z) * radius,
-        ];
-        let r = cols[0].length();
-        let similar = cols.iter().all(|v| (v.length() - r).abs() <= 1e-4 * r)
-            && cols[0].dot(cols[1]).abs() <= 1e-4 * r * r
-            && cols[0].dot(cols[2]).abs() <= 1e-4 * r * r
-            && cols[1].dot(cols[2]).abs() <= 1e-4 * r * r;
-        if !similar || r.is_nan() || r <= 0.0 || !c.is_finite() {
-            return Err(node.error(
-                "to_world must be a similarity (rotation, uniform scale, translation) for a sphere; use a mesh for ellipsoids",
-            ));
-        }
-        let mut rot = Mat3::from_cols(cols[0] / r, cols[1] / r, cols[2] / r);
-        if rot.determinant() < 0.0 {
-            rot = Mat3::from_cols(rot.x_axis, rot.y_axis, -rot.z_axis);
-        }
+        let placed =
+            to_world.m * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+        let (c, r, rot) = similarity(&placed).ok_or_else(|| node.error(NOT_SIMILAR))?;
         Self::new(&node.key, c, r, rot, flip_normals, &mut ctx.store).map_err(|e| node.error(e))
     }
 
@@ -86,10 +72,18 @@ impl Sphere {
             ParamFlags::GEOMETRY,
             Domain::Positive,
         )?;
+        let tid = store.add(
+            format!("{key}.to_world"),
+            placement(center, radius, rot),
+            vec![4, 4],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )?;
         Ok(Sphere {
             key: key.to_string(),
             center: cid,
             radius: rid,
+            to_world: tid,
             rot,
             flip_normals,
             area: 4.0 * PI * radius * radius,
@@ -104,10 +98,54 @@ impl Sphere {
         )
     }
 
-    /// Refreshes the cached area.
-    pub fn parameters_changed(&mut self, store: &ParamStore) {
+    /// Keeps `center`, `radius` and `to_world` in agreement after an update
+    /// (a new `to_world` wins over the other two), and refreshes the area.
+    pub fn parameters_changed(
+        &mut self,
+        store: &mut ParamStore,
+        changed: &[ParamId],
+    ) -> Result<()> {
+        if changed.contains(&self.to_world) {
+            let rows = store.data(self.to_world);
+            let m = Mat4::from_cols_slice(rows).transpose();
+            let (c, r, rot) = similarity(&m).ok_or_else(|| Error::Param {
+                key: store.get(self.to_world).key.clone(),
+                msg: NOT_SIMILAR.into(),
+            })?;
+            self.rot = rot;
+            let (ck, rk) = (
+                store.get(self.center).key.clone(),
+                store.get(self.radius).key.clone(),
+            );
+            store.set(&ck, &c.to_array())?;
+            store.set(&rk, &[r])?;
+        } else if changed.contains(&self.center) || changed.contains(&self.radius) {
+            let (c, r) = self.center_radius(store);
+            let key = store.get(self.to_world).key.clone();
+            store.set(&key, &placement(c, r, self.rot))?;
+        }
         let r = store.value(self.radius, 0);
         self.area = 4.0 * PI * r * r;
+        Ok(())
+    }
+
+    /// Centre, radius and the images of the local axes (unit), in `R`:
+    /// from `to_world` when its reads carry derivatives, else from
+    /// `center` and `radius` with the rotation a constant.
+    fn frame_r<R: Real>(&self, store: &ParamStore) -> (V3<R>, R, [V3<R>; 3]) {
+        if R::tracks(store, self.to_world) {
+            let m = |r: usize, c: usize| -> R { store.read(self.to_world, 4 * r + c) };
+            let col = |c: usize| V3::new(m(0, c), m(1, c), m(2, c));
+            let r = col(0).length();
+            let axes = [col(0) / r, col(1) / r, col(2) / r];
+            return (col(3), r, axes);
+        }
+        let axes = [self.rot.x_axis, self.rot.y_axis, self.rot.z_axis].map(V3::cst);
+        (
+            store.read3(self.center, 0),
+            store.read(self.radius, 0),
+            axes,
+        )
     }
 
     /// Ray–sphere intersection in f32 on the open interval (tmin, tmax);
@@ -137,6 +175,34 @@ impl Sphere {
     }
 }
 
+const NOT_SIMILAR: &str = "to_world must be a similarity (rotation, uniform scale, translation) for a sphere; use a mesh for ellipsoids";
+
+/// Centre, radius and rotation (right-handed) of the unit sphere placed by
+/// `m`, if `m` is a similarity.
+fn similarity(m: &Mat4) -> Option<(Vec3, f32, Mat3)> {
+    let c = m.transform_point3(Vec3::ZERO);
+    let cols = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| m.transform_vector3(a));
+    let r = cols[0].length();
+    let similar = cols.iter().all(|v| (v.length() - r).abs() <= 1e-4 * r)
+        && cols[0].dot(cols[1]).abs() <= 1e-4 * r * r
+        && cols[0].dot(cols[2]).abs() <= 1e-4 * r * r
+        && cols[1].dot(cols[2]).abs() <= 1e-4 * r * r;
+    if !similar || r.is_nan() || r <= 0.0 || !c.is_finite() {
+        return None;
+    }
+    let mut rot = Mat3::from_cols(cols[0] / r, cols[1] / r, cols[2] / r);
+    if rot.determinant() < 0.0 {
+        rot = Mat3::from_cols(rot.x_axis, rot.y_axis, -rot.z_axis);
+    }
+    Some((c, r, rot))
+}
+
+/// The row-major `to_world` of centre `c`, radius `r`, rotation `rot`.
+fn placement(c: Vec3, r: f32, rot: Mat3) -> Vec<f32> {
+    let m = Mat4::from_translation(c) * Mat4::from_mat3(rot) * Mat4::from_scale(Vec3::splat(r));
+    m.transpose().to_cols_array().to_vec()
+}
+
 impl ShapeT for Sphere {
     fn surface_interaction<R: Real>(
         &self,
@@ -144,8 +210,7 @@ impl ShapeT for Sphere {
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
-        let c: V3<R> = store.read3(self.center, 0);
-        let r: R = store.read(self.radius, 0);
+        let (c, r, axes) = self.frame_r::<R>(store);
         let (o, d) = (ray.o, ray.d);
         // both roots in R; keep the one the traversal found
         let oc = o - c;
@@ -165,7 +230,7 @@ impl ShapeT for Sphere {
             -b
         };
         let p = o + d * t;
-        let mut si = self.local_geometry(hit, c, r, p, t);
+        let mut si = self.local_geometry(hit, c, r, axes, p, t);
         si.set_wi(-d);
         si
     }
@@ -174,11 +239,11 @@ impl ShapeT for Sphere {
     /// sphere's local frame: it moves with the centre and scales with the
     /// radius.
     fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
-        let c: V3<R> = store.read3(self.center, 0);
-        let r: R = store.read(self.radius, 0);
-        let dir = (p - c.val()).normalize();
-        let p = c + V3::cst(dir) * r;
-        self.local_geometry(hit, c, r, p, R::cst(hit.t))
+        let (c, r, axes) = self.frame_r::<R>(store);
+        let local = self.rot.transpose() * (p - c.val()).normalize();
+        let dir = axes[0] * R::cst(local.x) + axes[1] * R::cst(local.y) + axes[2] * R::cst(local.z);
+        let p = c + dir * r;
+        self.local_geometry(hit, c, r, axes, p, R::cst(hit.t))
     }
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -211,20 +276,20 @@ impl Sphere {
         hit: &Hit,
         c: V3<R>,
         r: R,
+        axes: [V3<R>; 3],
         p: V3<R>,
         t: R,
     ) -> SurfaceInteraction<R> {
         let mut n = (p - c) / r;
-        // local frame (rotation is a constant)
-        let (cx, cy, cz) = (self.rot.x_axis, self.rot.y_axis, self.rot.z_axis);
-        let lx = n.dot(V3::cst(cx));
-        let ly = n.dot(V3::cst(cy));
-        let lz = n.dot(V3::cst(cz));
+        let [cx, cy, cz] = axes;
+        let lx = n.dot(cx);
+        let ly = n.dot(cy);
+        let lz = n.dot(cz);
         let theta = lz.clamp(-1.0, 1.0).acos();
         let phi = azimuth(ly, lx);
         let uv = V2::new(phi * (0.5 / PI), theta * (1.0 / PI));
         // dp/du = 2π r (-ly, lx, 0) in the local frame
-        let dpdu = (V3::cst(cy) * lx - V3::cst(cx) * ly) * (r * (2.0 * PI));
+        let dpdu = (cy * lx - cx * ly) * (r * (2.0 * PI));
         if self.flip_normals {
             n = -n;
         }
