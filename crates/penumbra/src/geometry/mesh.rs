@@ -81,8 +81,9 @@ pub struct Mesh {
     /// were placed by; setting it moves them (and the normals) by the
     /// change, and its derivative moves them likewise.
     pub to_world_id: ParamId,
-    /// The transform the stored vertices are placed by now.
-    to_world: Transform,
+    /// The transform the stored vertices are placed by now (boxed: the
+    /// shape enum stays small).
+    to_world: Box<Transform>,
     pub face_normals: bool,
     pub flip_normals: bool,
     /// What was skipped at load (reported once, as a warning).
@@ -257,7 +258,7 @@ impl Mesh {
         };
         let mut mesh = Mesh {
             to_world_id,
-            to_world: *to_world,
+            to_world: Box::new(*to_world),
             vertex_faces,
             plugin,
             key: key.to_string(),
@@ -402,7 +403,7 @@ impl Mesh {
             let normals_key = store.get(nid).key.clone();
             store.set(&normals_key, &turned)?;
         }
-        self.to_world = new;
+        *self.to_world = new;
         Ok(())
     }
 
