@@ -6,7 +6,11 @@
 //!   load), flags [`ParamFlags::GEOMETRY`], domain [`Domain::Finite`];
 //! - `<key>.vertex_normals`: `[n, 3]`, world space, unit length, if the
 //!   file has normals or they were computed (not with `face_normals`);
-//! - `<key>.vertex_texcoords`: `[n, 2]`, if the file has uvs.
+//! - `<key>.vertex_texcoords`: `[n, 2]`, if the file has uvs;
+//! - `<key>.to_world`: `[4, 4]`, row-major, geometry: the transform the
+//!   vertices are placed by (not a Mitsuba mesh parameter: Penumbra's way
+//!   to move or optimise a whole mesh rigidly). Setting it moves the
+//!   vertices and normals by the change from the previous value.
 //!
 //! Faces (topology) are not parameters: they stay in the mesh.
 //!
