@@ -298,10 +298,9 @@ fn textured_area_emitter_translated_and_rotated() {
     check_in_expectation("light moved (paths)", &xml, key, moved);
 }
 
-#[test]
-fn rotated_vertex_normals() {
-    // the plane as a PLY mesh with vertex normals (in the file: the xz
-    // plane, normal +y)
+/// The area-light scene with emitter sampling, the plane being a PLY mesh
+/// with vertex normals (in the file: the xz plane, normal +y).
+fn ply_plane_scene() -> String {
     let plane = PLANE
         .replace(
             r#"<shape type="rectangle" id="plane">"#,
@@ -311,11 +310,16 @@ fn rotated_vertex_normals() {
             r#"<scale value="10"/>"#,
             r#"<scale value="10"/><rotate x="1" angle="90"/>"#,
         );
-    let xml = scene_xml(
+    scene_xml(
         EMITTER_SAMPLING,
         &oblique_sensor(),
         &format!("{plane}{}", light(CONSTANT_RADIANCE)),
-    );
+    )
+}
+
+#[test]
+fn rotated_vertex_normals() {
+    let xml = ply_plane_scene();
     // tilt every vertex normal towards +x (interpolated, then normalised)
     check(
         "vertex normals",
@@ -573,20 +577,7 @@ fn mesh_to_world() {
         1e-3,
     );
     // a mesh with vertex normals: they turn with the transform
-    let plane = PLANE
-        .replace(
-            r#"<shape type="rectangle" id="plane">"#,
-            r#"<shape type="ply" id="plane"><string name="filename" value="meshes/plane_uv.ply"/>"#,
-        )
-        .replace(
-            r#"<scale value="10"/>"#,
-            r#"<scale value="10"/><rotate x="1" angle="90"/>"#,
-        );
-    let xml = scene_xml(
-        EMITTER_SAMPLING,
-        &oblique_sensor(),
-        &format!("{plane}{}", light(CONSTANT_RADIANCE)),
-    );
+    let xml = ply_plane_scene();
     check(
         "ply to_world turned",
         &xml,
