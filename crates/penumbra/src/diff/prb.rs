@@ -191,7 +191,8 @@ fn backward_pass(
         weights.accumulate(b);
     }
 
-    // 2. replay every sample with its adjoint radiance
+    // 2. trace every sample on recorded variables and backpropagate its
+    //    adjoint radiance
     let tiles = layout.map_tiles(opts, |tile| {
         let mut grads = TileGrads::new();
         let mut sample_grads = SampleGrads::new();
