@@ -73,16 +73,25 @@ fn path_integrator(max_depth: u32) -> String {
     )
 }
 
-/// A 20 × 20 textured diffuse plane at z = 0 (id `plane`), normal +z.
-const PLANE: &str = r#"
-    <shape type="rectangle" id="plane">
-        <transform name="to_world"><scale value="10"/></transform>
-        <bsdf type="diffuse">
+/// The diffuse BSDF textured with `textures/texture.exr` that the test
+/// surfaces wear.
+macro_rules! textured_diffuse {
+    () => {
+        r#"<bsdf type="diffuse">
             <texture type="bitmap" name="reflectance">
                 <string name="filename" value="textures/texture.exr"/>
             </texture>
-        </bsdf>
-    </shape>"#;
+        </bsdf>"#
+    };
+}
+
+/// A 20 × 20 textured diffuse plane at z = 0 (id `plane`), normal +z.
+const PLANE: &str = concat!(
+    r#"<shape type="rectangle" id="plane">
+        <transform name="to_world"><scale value="10"/></transform>"#,
+    textured_diffuse!(),
+    "</shape>"
+);
 
 /// A 1 × 1 area light (id `light`) at height 2 facing down, with a
 /// constant or textured radiance.
@@ -393,21 +402,18 @@ fn glass_plate_rotated_in_front_of_a_thin_lens() {
 /// The camera inside a sphere (normals flipped inwards) lit by a point
 /// light: the sphere fills the view whatever its centre and radius.
 fn inside_sphere_xml(integrator: &str) -> String {
-    let body = r#"
-        <shape type="sphere" id="ball">
+    let body = concat!(
+        r#"<shape type="sphere" id="ball">
             <point name="center" value="0.1, 0.2, 0.3"/>
             <float name="radius" value="6"/>
-            <boolean name="flip_normals" value="true"/>
-            <bsdf type="diffuse">
-                <texture type="bitmap" name="reflectance">
-                    <string name="filename" value="textures/texture.exr"/>
-                </texture>
-            </bsdf>
-        </shape>
+            <boolean name="flip_normals" value="true"/>"#,
+        textured_diffuse!(),
+        r#"</shape>
         <emitter type="point">
             <point name="position" value="0.5, 0.5, 1"/>
             <rgb name="intensity" value="30"/>
-        </emitter>"#;
+        </emitter>"#
+    );
     scene_xml(
         integrator,
         &sensor_xml("0, -1, 1", 40.0, SIZE, SPP, Some("box")),
@@ -449,19 +455,16 @@ fn sphere_centre_and_radius() {
 
 #[test]
 fn disk_to_world() {
-    let body = r#"
-        <shape type="disk" id="floor">
-            <transform name="to_world"><scale value="20"/></transform>
-            <bsdf type="diffuse">
-                <texture type="bitmap" name="reflectance">
-                    <string name="filename" value="textures/texture.exr"/>
-                </texture>
-            </bsdf>
-        </shape>
+    let body = concat!(
+        r#"<shape type="disk" id="floor">
+            <transform name="to_world"><scale value="20"/></transform>"#,
+        textured_diffuse!(),
+        r#"</shape>
         <emitter type="point">
             <point name="position" value="0.5, 0.5, 2"/>
             <rgb name="intensity" value="10"/>
-        </emitter>"#;
+        </emitter>"#
+    );
     let xml = scene_xml(EMITTER_SAMPLING, &oblique_sensor(), body);
     // row-major 4×4: translation in x and z, and a small shear of the z axis
     let mut t = vec![0.0f32; 16];

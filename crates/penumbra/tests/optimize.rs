@@ -1,4 +1,4 @@
-//! An optimisation job end to end (TOML → targets → Adam on path-replay
+//! An optimisation job end to end (TOML → targets → Adam on reverse-mode
 //! gradients → outputs): the Cornell box's red wall, started grey, moves
 //! towards its true colour, and the job writes its images (target and
 //! final render side by side), parameters, loss table and plots.
@@ -6,21 +6,29 @@
 use penumbra::optim::Job;
 use std::path::PathBuf;
 
-#[test]
-fn cbox_red_wall_job_recovers_the_colour() {
+/// Writes a job file whose `scene` is the repository file `scene` and whose
+/// other entries are `body`, in a fresh temporary folder named after
+/// `name`; returns the folder and the job file.
+fn write_job(name: &str, scene: &str, body: &str) -> (PathBuf, PathBuf) {
     let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let dir = std::env::temp_dir().join(format!("penumbra-job-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let job = dir.join("job.toml");
-    std::fs::write(
-        &job,
-        format!(
-            r#"scene = "{}"
-defines = {{ res = "32", max_depth = "4" }}
+    let text = format!("scene = \"{}\"\n{body}", repo.join(scene).display());
+    std::fs::write(&job, text).unwrap();
+    (dir, job)
+}
+
+#[test]
+fn cbox_red_wall_job_recovers_the_colour() {
+    let (dir, job) = write_job(
+        "penumbra-job",
+        "scenes/cbox.xml",
+        r#"defines = { res = "32", max_depth = "4" }
 output = "out"
 iterations = 40
 spp = 8
-target = {{ render_spp = 128 }}
+target = { render_spp = 128 }
 save_every = 20
 
 [[param]]
@@ -28,10 +36,7 @@ key = "red.reflectance.value"
 init = 0.4
 lr = 0.03
 "#,
-            repo.join("scenes/cbox.xml").display()
-        ),
-    )
-    .unwrap();
+    );
     let mut job = Job::load(&job).unwrap();
     let mut seen = 0;
     let result = job.run(|_, _| seen += 1).unwrap();
@@ -100,19 +105,14 @@ fn textured_job_texels_are_reflectances() {
 /// pose and its error.
 #[test]
 fn pose_job_recovers_the_plane_pose() {
-    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let dir = std::env::temp_dir().join(format!("penumbra-pose-job-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let job = dir.join("job.toml");
-    std::fs::write(
-        &job,
-        format!(
-            r#"scene = "{}"
-defines = {{ res = "32", max_depth = "2" }}
+    let (dir, job) = write_job(
+        "penumbra-pose-job",
+        "scenes/textured.xml",
+        r#"defines = { res = "32", max_depth = "2" }
 output = "out"
 iterations = 40
 spp = 8
-target = {{ render_spp = 64 }}
+target = { render_spp = 64 }
 save_every = 40
 
 [[pose]]
@@ -126,10 +126,7 @@ lr_rotation_deg = 0.5
 origin = [-0.6, 1.3, -0.2]
 target = [-0.6, 0.0, -0.5]
 "#,
-            repo.join("scenes/textured.xml").display()
-        ),
-    )
-    .unwrap();
+    );
     let mut job = Job::load(&job).unwrap();
     let result = job.run(|_, _| {}).unwrap();
     let curve = &result.pose_error_curve;
