@@ -412,7 +412,7 @@ fn run(cli: Cli) -> Result<(), String> {
                         .zip(tangents.iter().map(Vec::as_slice))
                         .collect();
                     step("forward mode");
-                    let d = render_forward(&mut scene, &pairs, &opts).map_err(err)?;
+                    let d = render_forward(&scene, &pairs, &opts).map_err(err)?;
                     times.push(t.elapsed().as_secs_f64());
                     if i == 0 {
                         let img = Image {
@@ -437,7 +437,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     ..opts.clone()
                 };
                 step("gradients");
-                let g = render_backward(&mut scene, &d_img, Some(&keys), &gopts).map_err(err)?;
+                let g = render_backward(&scene, &d_img, Some(&keys), &gopts).map_err(err)?;
                 times.push(t.elapsed().as_secs_f64());
                 if i > 0 {
                     continue;

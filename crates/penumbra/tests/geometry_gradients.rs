@@ -477,7 +477,7 @@ fn disk_to_world() {
 /// ⟨δI, dI/dθ·v⟩ (forward mode) against ⟨∂L/∂θ, v⟩ (reverse mode) with
 /// L = ⟨δI, I⟩, same samples.
 fn assert_forward_matches_reverse(name: &str, xml: &str, key: &str) {
-    let mut scene = load(xml);
+    let scene = load(xml);
     let id = scene.params.require(key).unwrap();
     let n = scene.params.data(id).len();
     let mut rng = 0x2545_f491_4f6c_dd1du64;
@@ -491,9 +491,9 @@ fn assert_forward_matches_reverse(name: &str, xml: &str, key: &str) {
     let pixels = (SIZE * SIZE * 3) as usize;
     let adjoint: Vec<f32> = (0..pixels).map(|_| next()).collect();
     let o = opts();
-    let fwd = render_forward(&mut scene, &[(key, &v)], &o).unwrap().data;
+    let fwd = render_forward(&scene, &[(key, &v)], &o).unwrap().data;
     let lhs: f64 = fwd.iter().zip(&adjoint).map(|(a, b)| (a * b) as f64).sum();
-    let grads = render_backward(&mut scene, &adjoint, Some(&[key]), &o).unwrap();
+    let grads = render_backward(&scene, &adjoint, Some(&[key]), &o).unwrap();
     let g = grads.get(key).unwrap();
     let rhs: f64 = g.iter().zip(&v).map(|(a, b)| (a * b) as f64).sum();
     let scale: f64 = fwd

@@ -69,7 +69,7 @@ fn read_npy(path: &PathBuf) -> Vec<f32> {
 
 #[test]
 fn forward_mode_matches_mitsuba_on_cbox_red_wall() {
-    let mut scene = load("cbox");
+    let scene = load("cbox");
     let key = "red.reflectance.value";
     let rho = scene
         .params
@@ -81,7 +81,7 @@ fn forward_mode_matches_mitsuba_on_cbox_red_wall() {
     let mut image = vec![0.0f64; reference.data.len()];
     let batches = 8;
     for b in 0..batches {
-        let d = render_forward(&mut scene, &[(key, &rho)], &opts(16, b)).unwrap();
+        let d = render_forward(&scene, &[(key, &rho)], &opts(16, b)).unwrap();
         sums.push(d.data.iter().map(|&v| v as f64).sum());
         image
             .iter_mut()
@@ -124,7 +124,7 @@ fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
         let o = opts(64, 100 + b);
         let img = render(&scene, &o).unwrap();
         let (_, d_img) = Loss::L2.eval(&img.data, &target.data).unwrap();
-        let g = render_backward(&mut scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
+        let g = render_backward(&scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
         for (c, v) in g.get(key).unwrap().iter().enumerate() {
             per_channel[c].push(*v as f64);
         }
@@ -161,7 +161,7 @@ fn reverse_mode_matches_mitsuba_on_texture() {
         let o = opts(32, 200 + b);
         let img = render(&scene, &o).unwrap();
         let (_, d_img) = Loss::L2.eval(&img.data, &target.data).unwrap();
-        let g = render_backward(&mut scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
+        let g = render_backward(&scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
         let g = g.get(key).unwrap();
         sums.push(g.iter().map(|&v| v as f64).sum());
         grad.iter_mut()

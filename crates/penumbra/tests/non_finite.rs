@@ -32,7 +32,7 @@ fn scene(radiance: &str) -> Scene {
 /// (primal, forward, reverse) counts of non-finite samples, with checks
 /// that what was kept is finite.
 fn counts(radiance: &str) -> (usize, usize, usize) {
-    let mut s = scene(radiance);
+    let s = scene(radiance);
     let opts = RenderOptions {
         seed: 5,
         ..Default::default()
@@ -40,12 +40,12 @@ fn counts(radiance: &str) -> (usize, usize, usize) {
     let img = render(&s, &opts).unwrap();
     assert!(img.data.iter().all(|v| v.is_finite()));
     let key = "white.reflectance.value";
-    let fwd = render_forward(&mut s, &[(key, &[1.0, 1.0, 1.0])], &opts).unwrap();
+    let fwd = render_forward(&s, &[(key, &[1.0, 1.0, 1.0])], &opts).unwrap();
     assert!(fwd.data.iter().all(|v| v.is_finite()));
     // a small adjoint, so that the sum of the kept (finite, up to 1e38)
     // contributions stays within f32
     let adjoint = vec![1e-30f32; img.width * img.height * 3];
-    let g = render_backward(&mut s, &adjoint, Some(&[key]), &opts).unwrap();
+    let g = render_backward(&s, &adjoint, Some(&[key]), &opts).unwrap();
     assert!(g.get(key).unwrap().iter().all(|v| v.is_finite()));
     (
         img.non_finite_samples,

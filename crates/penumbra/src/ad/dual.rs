@@ -2,7 +2,7 @@
 //! direction of the parameter space.
 
 use super::Real;
-use crate::params::{ParamId, ParamStore};
+use crate::params::{ParamId, ParamView};
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 /// `v + d·ε` with `ε² = 0`: `d` is the directional derivative of `v` along
@@ -35,11 +35,11 @@ impl Real for Dual {
         self.v
     }
     #[inline(always)]
-    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
+    fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         Dual::new(store.value(id, index), store.tangent(id, index))
     }
-    fn tracks(store: &ParamStore, id: ParamId) -> bool {
-        store.get(id).tangent.is_some()
+    fn tracks(store: &ParamView, id: ParamId) -> bool {
+        store.has_tangent(id)
     }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();

@@ -18,7 +18,7 @@ pub mod reverse;
 pub use dual::Dual;
 pub use reverse::Var;
 
-use crate::params::{ParamId, ParamStore};
+use crate::params::{ParamId, ParamView};
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -57,11 +57,11 @@ pub trait Real:
     fn val(self) -> f32;
     /// Element `index` of parameter `id`, read from `store`: the one place
     /// where derivatives are seeded (forward) or tagged (reverse).
-    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self;
+    fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self;
     /// Whether reads of parameter `id` carry derivatives (a tangent is set
     /// in forward mode, its gradient is requested in reverse mode): lets
     /// code that only exists for such derivatives be skipped.
-    fn tracks(_store: &ParamStore, _id: ParamId) -> bool {
+    fn tracks(_store: &ParamView, _id: ParamId) -> bool {
         false
     }
 
@@ -138,7 +138,7 @@ impl Real for f32 {
         self
     }
     #[inline(always)]
-    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
+    fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         store.value(id, index)
     }
     #[inline(always)]

@@ -9,7 +9,7 @@
 //! the tape: memory stays independent of path length and sample count.
 
 use super::Real;
-use crate::params::{ParamId, ParamStore};
+use crate::params::{ParamId, ParamView};
 use std::cell::RefCell;
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -159,14 +159,12 @@ impl Real for Var {
     fn val(self) -> f32 {
         self.v
     }
-    fn tracks(store: &ParamStore, id: ParamId) -> bool {
-        let p = store.get(id);
-        p.flags.differentiable && p.grad_enabled
+    fn tracks(store: &ParamView, id: ParamId) -> bool {
+        store.is_recorded(id)
     }
-    fn from_param(store: &ParamStore, id: ParamId, index: usize) -> Self {
+    fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         let v = store.value(id, index);
-        let p = store.get(id);
-        if !(p.flags.differentiable && p.grad_enabled) {
+        if !store.is_recorded(id) {
             return Var::cst(v);
         }
         TAPE.with(|t| {
@@ -326,13 +324,13 @@ impl DivAssign for Var {
 mod tests {
     use super::*;
     use crate::ad::Dual;
-    use crate::params::{Domain, ParamFlags};
+    use crate::params::{Domain, ParamFlags, ParamStore, Seeds};
 
     /// The same generic function differentiated in forward mode (per input)
     /// and reverse mode (all inputs at once) gives the same gradient.
     #[test]
     fn reverse_gradient_equals_forward_derivatives() {
-        fn f<R: Real>(s: &ParamStore, id: ParamId) -> R {
+        fn f<R: Real>(s: &ParamView, id: ParamId) -> R {
             let (a, b, c): (R, R, R) = (s.read(id, 0), s.read(id, 1), s.read(id, 2));
             ((a * b).sin() + c.sqrt() * a.exp() - b / (c + 1.0)).powf(1.5) + a.atan2(c) * b.acos()
         }
@@ -346,9 +344,9 @@ mod tests {
                 Domain::Finite,
             )
             .unwrap();
-        s.set_grad_enabled(&[id]);
+        let recorded = Seeds::recorded(&s, &[id]).unwrap();
         clear_tape();
-        let out: Var = f(&s, id);
+        let out: Var = f(&s.view(&recorded), id);
         let mut grad = [0.0f32; 3];
         backward(&[(out, 2.0)], |pid, i, g| {
             assert_eq!(pid, id);
@@ -357,8 +355,8 @@ mod tests {
         for k in 0..3 {
             let mut t = [0.0; 3];
             t[k] = 1.0;
-            s.set_tangent("x.value", &t).unwrap();
-            let d: Dual = f(&s, id);
+            let seeds = Seeds::tangents(&s, &[("x.value", &t)]).unwrap();
+            let d: Dual = f(&s.view(&seeds), id);
             assert!(
                 (grad[k] - 2.0 * d.d).abs() < 1e-5 * d.d.abs().max(1.0),
                 "{k}: {} vs {}",
@@ -382,7 +380,7 @@ mod tests {
             )
             .unwrap();
         clear_tape();
-        let v: Var = s.read(id, 0);
+        let v: Var = s.primal().read(id, 0);
         let w = (v * 3.0 + Var::cst(2.0)).sqrt();
         assert!(!w.is_attached());
         TAPE.with(|t| assert!(t.borrow().nodes.is_empty()));

@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -51,7 +51,7 @@ impl BlendBsdf {
         }
     }
 
-    fn w<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+    fn w<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         self.weight.eval_1(store, si).clamp(0.0, 1.0)
     }
 }
@@ -63,7 +63,7 @@ impl BsdfT for BlendBsdf {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -71,7 +71,7 @@ impl BsdfT for BlendBsdf {
         self.bsdfs[0].eval(store, si, wo) * (-w + 1.0) + self.bsdfs[1].eval(store, si, wo) * w
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let w = self.w(store, si).val();
         let mut p = 0.0;
         if w < 1.0 {
@@ -85,7 +85,7 @@ impl BsdfT for BlendBsdf {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -108,7 +108,7 @@ impl BsdfT for BlendBsdf {
         }
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         let w = self.w(store, si);
         self.bsdfs[0].albedo(store, si) * (-w + 1.0) + self.bsdfs[1].albedo(store, si) * w
     }
@@ -120,6 +120,7 @@ mod tests {
     use super::super::{Bsdf, BsdfFlags, BsdfT};
     use crate::ad::Dual;
     use crate::math::V3;
+    use crate::params::Seeds;
     use crate::scene::LoadContext;
 
     #[test]
@@ -138,7 +139,7 @@ mod tests {
         );
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
-        let mut store = ctx.store;
+        let store = ctx.store;
         for k in [
             "bl.weight.value",
             "bl.bsdf_0.reflectance.value",
@@ -150,11 +151,12 @@ mod tests {
         let wi = dir(0.7, 0.0);
         let wo = dir(0.6, 3.0);
         let s = si::<f32>(wi);
-        let want = bb.bsdfs[0].eval(&store, &s, V3::cst(wo)).val() * 0.7
-            + bb.bsdfs[1].eval(&store, &s, V3::cst(wo)).val() * 0.3;
+        let want = bb.bsdfs[0].eval(&store.primal(), &s, V3::cst(wo)).val() * 0.7
+            + bb.bsdfs[1].eval(&store.primal(), &s, V3::cst(wo)).val() * 0.3;
         assert!((eval_f32(&b, &store, wi, wo) - want).abs().max_element() < 1e-6);
         check_smooth(&b, &store, &[wi, dir(0.2, 1.0)], 1);
-        store.set_tangent("bl.weight.value", &[1.0]).unwrap();
+        let seeds = Seeds::tangents(&store, &[("bl.weight.value", &[1.0])]).unwrap();
+        let store = store.view(&seeds);
         let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
         let diff = bb.bsdfs[1].eval(&store, &s, V3::cst(wo)).val()
             - bb.bsdfs[0].eval(&store, &s, V3::cst(wo)).val();
@@ -173,7 +175,12 @@ mod tests {
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
         let bs = b
-            .sample(&ctx.store, &si::<f32>(wi), 0.1, glam::Vec2::splat(0.5))
+            .sample(
+                &ctx.store.primal(),
+                &si::<f32>(wi),
+                0.1,
+                glam::Vec2::splat(0.5),
+            )
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         assert!((bs.pdf - 0.5).abs() < 1e-6 && (bs.weight.x - 1.0).abs() < 1e-6);

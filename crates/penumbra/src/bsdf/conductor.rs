@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -72,7 +72,7 @@ impl ConductorIor {
     /// Fresnel reflectance for incident cosine `cos_i` at `si`.
     pub fn fresnel<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         cos_i: R,
     ) -> Spectrum<R> {
@@ -111,15 +111,15 @@ impl BsdfT for Conductor {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DELTA_REFLECTION
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
-    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
         0.0
     }
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         _u1: f32,
         _u2: Vec2,
@@ -131,7 +131,7 @@ impl BsdfT for Conductor {
         let weight = f.mul_elem(self.specular_reflectance.eval(store, si));
         Some(BsdfSample::specular_reflection(si.wi, 1.0, weight))
     }
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
     }
 }
@@ -151,13 +151,18 @@ mod tests {
         }
         let wi = dir(0.3, 1.0);
         let bs = b
-            .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5))
+            .sample(&store.primal(), &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5))
             .unwrap();
         assert!((bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
         assert!((bs.weight.val() - glam::Vec3::ONE).abs().max_element() < 1e-6);
         assert!(eval_f32(&b, &store, wi, bs.wo.val()) == glam::Vec3::ZERO);
         assert!(b
-            .sample(&store, &si::<f32>(-wi), 0.5, glam::Vec2::splat(0.5))
+            .sample(
+                &store.primal(),
+                &si::<f32>(-wi),
+                0.5,
+                glam::Vec2::splat(0.5)
+            )
             .is_none());
 
         let (b, store) = build(
@@ -169,7 +174,7 @@ mod tests {
         );
         check_direction_derivatives(&b, &store, 3);
         let bs = b
-            .sample(&store, &si::<f32>(wi), 0.1, glam::Vec2::ZERO)
+            .sample(&store.primal(), &si::<f32>(wi), 0.1, glam::Vec2::ZERO)
             .unwrap();
         let want = 0.5 * fresnel_conductor_1(wi.z, 0.143036, 3.983);
         assert!((bs.weight.x - want).abs() < 1e-5, "{bs:?} {want}");

@@ -10,7 +10,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -49,15 +49,15 @@ impl BsdfT for Dielectric {
             .union(BsdfFlags::DELTA_TRANSMISSION)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
-    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
         0.0
     }
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         _u2: Vec2,
@@ -80,7 +80,7 @@ impl BsdfT for Dielectric {
             (wo, value, eta_it.val(), BsdfFlags::DELTA_TRANSMISSION),
         )
     }
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
     }
 }
@@ -114,7 +114,9 @@ mod tests {
             let mut rng = Pcg32::new(3);
             let (mut nr, n) = (0, 4000);
             for _ in 0..n {
-                let bs = b.sample(&store, &s, rng.next_f32(), Vec2::ZERO).unwrap();
+                let bs = b
+                    .sample(&store.primal(), &s, rng.next_f32(), Vec2::ZERO)
+                    .unwrap();
                 if bs.lobe == BsdfFlags::DELTA_REFLECTION {
                     nr += 1;
                     assert!((bs.wo.val() - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
@@ -144,7 +146,12 @@ mod tests {
         }
         // total internal reflection from inside at grazing angles
         let bs = b
-            .sample(&store, &si::<f32>(dir(-0.2, 0.0)), 0.999, Vec2::ZERO)
+            .sample(
+                &store.primal(),
+                &si::<f32>(dir(-0.2, 0.0)),
+                0.999,
+                Vec2::ZERO,
+            )
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
     }
@@ -162,7 +169,7 @@ mod tests {
         assert!(store.id("b.specular_transmittance.value").is_some());
         assert!(store.id("b.specular_reflectance.value").is_none());
         let bs = b
-            .sample(&store, &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO)
+            .sample(&store.primal(), &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO)
             .unwrap();
         assert!(
             (bs.weight.x - 0.5 / (1.5f32 / 1.000277).powi(2)).abs() < 1e-5,

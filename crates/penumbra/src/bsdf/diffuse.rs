@@ -5,7 +5,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -40,7 +40,7 @@ impl BsdfT for Diffuse {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -50,7 +50,7 @@ impl BsdfT for Diffuse {
         self.reflectance.eval(store, si) * (wo.z * FRAC_1_PI)
     }
 
-    fn pdf<R: Real>(&self, _store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, _store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         if !(si.wi.z.val() > 0.0) {
             return 0.0;
         }
@@ -59,7 +59,7 @@ impl BsdfT for Diffuse {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         _u1: f32,
         u2: Vec2,
@@ -82,7 +82,7 @@ impl BsdfT for Diffuse {
         })
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.reflectance.eval(store, si)
     }
 }

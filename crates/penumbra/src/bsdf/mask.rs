@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -39,7 +39,7 @@ impl Mask {
         self.nested.parameters_changed(store);
     }
 
-    fn o<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+    fn o<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         self.opacity.eval_1(store, si).clamp(0.0, 1.0)
     }
 }
@@ -54,20 +54,20 @@ impl BsdfT for Mask {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
         self.nested.eval(store, si, wo) * self.o(store, si)
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         self.o(store, si).val() * self.nested.pdf(store, si, wo)
     }
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -85,7 +85,7 @@ impl BsdfT for Mask {
         Some(chosen_with(bs, o, o_r))
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.nested.albedo(store, si) * self.o(store, si)
     }
 }
@@ -115,7 +115,7 @@ mod tests {
         );
         let wi = dir(0.6, 1.0);
         let bs = b
-            .sample(&store, &si::<f32>(wi), 0.9, glam::Vec2::splat(0.5))
+            .sample(&store.primal(), &si::<f32>(wi), 0.9, glam::Vec2::splat(0.5))
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::NULL);
         assert!(

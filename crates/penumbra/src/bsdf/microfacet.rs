@@ -15,7 +15,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::V3;
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -344,7 +344,7 @@ impl Roughness {
     /// The distribution at surface point `si`, roughness read as `R`.
     pub fn distribution<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
     ) -> MicrofacetDistribution<R> {
         let au = self.alpha_u.eval_1(store, si);

@@ -43,7 +43,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Frame, Spectrum, V2, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{Class, LoadContext, Node, Prop, Value};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -131,22 +131,22 @@ pub trait BsdfT {
     /// differentiable in `si.wi` and `wo` (local frame).
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R>;
     /// Solid-angle density with which `sample` returns `wo` (smooth lobes).
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32;
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32;
     /// Samples an outgoing direction; `u1` picks a lobe, `u2` the direction.
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
     ) -> Option<BsdfSample<R>>;
     /// The surface's albedo-like colour (for the AOV integrator).
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
 }
 
 /// All BSDF plugins.
@@ -209,20 +209,20 @@ impl BsdfT for Bsdf {
     #[inline]
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
         dispatch!(self, b => b.eval(store, si, wo))
     }
     #[inline]
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         dispatch!(self, b => b.pdf(store, si, wo))
     }
     #[inline]
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -230,7 +230,7 @@ impl BsdfT for Bsdf {
         dispatch!(self, b => b.sample(store, si, u1, u2))
     }
     #[inline]
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         dispatch!(self, b => b.albedo(store, si))
     }
 }
@@ -342,7 +342,7 @@ pub(crate) fn specular_factors(
 pub(crate) fn modulate<R: Real>(
     value: Spectrum<R>,
     factor: &Option<Texture>,
-    store: &ParamStore,
+    store: &ParamView,
     si: &SurfaceInteraction<R>,
 ) -> Spectrum<R> {
     match factor {
@@ -466,7 +466,7 @@ fn rekey(node: &Node, key: &str) -> Node {
 /// integration, not a function of the parameters.
 pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
     b: &B,
-    store: &ParamStore,
+    store: &ParamView,
     si: &SurfaceInteraction<R>,
     wo: Vec3,
     eta: f32,
@@ -499,7 +499,7 @@ pub(crate) type Transmitted<R> = (V3<R>, R, f32, BsdfFlags);
 /// transmitted one `value / (1 − F)` times `specular_transmittance`.
 /// `None` when the transmission was chosen but has probability 0.
 pub(crate) fn sample_reflect_or_transmit<R: Real>(
-    store: &ParamStore,
+    store: &ParamView,
     si: &SurfaceInteraction<R>,
     f: R,
     specular_reflectance: &Option<Texture>,
@@ -546,7 +546,7 @@ pub(crate) fn chosen_with<R: Real>(mut bs: BsdfSample<R>, prob: f32, prob_r: R) 
 /// as the albedo of BSDFs without a diffuse colour.
 pub(crate) fn default_albedo<R: Real, B: BsdfT>(
     b: &B,
-    store: &ParamStore,
+    store: &ParamView,
     si: &SurfaceInteraction<R>,
 ) -> Spectrum<R> {
     b.eval(store, si, V3::cst(Vec3::Z))
@@ -623,8 +623,8 @@ mod tests {
                         (k * 7 % 16) as f32 / 16.0 + 0.01,
                         (k * 5 % 16) as f32 / 16.0 + 0.02,
                     );
-                    let a = b.sample(&store, &sf, u1, u2);
-                    let d = b.sample(&store, &sd, u1, u2);
+                    let a = b.sample(&store.primal(), &sf, u1, u2);
+                    let d = b.sample(&store.primal(), &sd, u1, u2);
                     match (a, d) {
                         (None, None) => {}
                         (Some(a), Some(d)) => {
@@ -634,8 +634,8 @@ mod tests {
                                 "{plugin}"
                             );
                             assert_eq!(a.weight.val(), d.weight.val(), "{plugin}");
-                            let fa = b.eval(&store, &sf, a.wo).val();
-                            let fd = b.eval(&store, &sd, V3::cst(a.wo.val())).val();
+                            let fa = b.eval(&store.primal(), &sf, a.wo).val();
+                            let fd = b.eval(&store.primal(), &sd, V3::cst(a.wo.val())).val();
                             assert_eq!(fa, fd, "{plugin}");
                         }
                         (a, d) => panic!("{plugin}: {a:?} vs {d:?}"),

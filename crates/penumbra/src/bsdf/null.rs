@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::ParamStore;
+use crate::params::ParamView;
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
@@ -24,22 +24,22 @@ impl BsdfT for Null {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::NULL.union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
-    fn pdf<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
         0.0
     }
     fn sample<R: Real>(
         &self,
-        _: &ParamStore,
+        _: &ParamView,
         si: &SurfaceInteraction<R>,
         _u1: f32,
         _u2: Vec2,
     ) -> Option<BsdfSample<R>> {
         Some(BsdfSample::pass_through(si.wi, 1.0, V3::splat(R::cst(1.0))))
     }
-    fn albedo<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
     }
 }
@@ -55,7 +55,7 @@ mod tests {
         check_direction_derivatives(&b, &store, 3);
         for wi in [dir(0.3, 1.0), dir(-0.8, 2.0)] {
             let bs = b
-                .sample(&store, &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
+                .sample(&store.primal(), &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
                 .unwrap();
             assert_eq!(bs.lobe, BsdfFlags::NULL);
             assert_eq!(bs.wo.val(), -wi);

@@ -12,7 +12,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -128,7 +128,7 @@ impl BsdfT for Plastic {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -151,7 +151,7 @@ impl BsdfT for Plastic {
         )
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let cos_i = si.wi.z.val();
         if !(cos_i > 0.0 && wo.z > 0.0) {
             return 0.0;
@@ -163,7 +163,7 @@ impl BsdfT for Plastic {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -183,7 +183,7 @@ impl BsdfT for Plastic {
         smooth_sample(self, store, si, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.diffuse_reflectance.eval(store, si)
     }
 }
@@ -211,13 +211,13 @@ mod tests {
         let (b, store) = build("plastic", &[]);
         let wi = dir(0.5, 0.3);
         let bs = b
-            .sample(&store, &si::<f32>(wi), 0.0, Vec2::splat(0.5))
+            .sample(&store.primal(), &si::<f32>(wi), 0.0, Vec2::splat(0.5))
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         let f = fresnel_dielectric(0.5f32, 1.49 / 1.000277).0;
         assert!((bs.weight.x * bs.pdf - f).abs() < 1e-6, "{bs:?}");
         assert!(b
-            .sample(&store, &si::<f32>(-wi), 0.0, Vec2::splat(0.5))
+            .sample(&store.primal(), &si::<f32>(-wi), 0.0, Vec2::splat(0.5))
             .is_none());
     }
 

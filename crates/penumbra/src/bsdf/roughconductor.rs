@@ -10,7 +10,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::ParamStore;
+use crate::params::ParamView;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -46,7 +46,7 @@ impl BsdfT for RoughConductor {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -70,7 +70,7 @@ impl BsdfT for RoughConductor {
         )
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let wi = si.wi.val();
         if !(wi.z > 0.0 && wo.z > 0.0) {
             return 0.0;
@@ -86,7 +86,7 @@ impl BsdfT for RoughConductor {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         _u1: f32,
         u2: Vec2,
@@ -113,7 +113,7 @@ impl BsdfT for RoughConductor {
         })
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
     }
 }
@@ -125,6 +125,7 @@ mod tests {
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::params::ParamStore;
+    use crate::params::Seeds;
     use glam::Vec3;
 
     #[test]
@@ -181,7 +182,7 @@ mod tests {
     #[test]
     fn alpha_derivative_matches_finite_differences() {
         for dist in ["ggx", "beckmann"] {
-            let (b, mut store) = build(
+            let (b, store) = build(
                 "roughconductor",
                 &[
                     ("distribution", string(dist)),
@@ -189,18 +190,18 @@ mod tests {
                     ("material", string("Cu")),
                 ],
             );
-            store.set_tangent("b.alpha.value", &[1.0]).unwrap();
+            let seeds = Seeds::tangents(&store, &[("b.alpha.value", &[1.0])]).unwrap();
             let wi = dir(0.7, 0.2);
             for wo in [dir(0.6, 3.0), dir(0.8, 3.3), dir(0.3, 2.5)] {
-                let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
-                let f = b.eval(&store, &si::<f32>(wi), V3::cst(wo));
+                let d = b.eval(&store.view(&seeds), &si::<Dual>(wi), V3::cst(wo));
+                let f = b.eval(&store.primal(), &si::<f32>(wi), V3::cst(wo));
                 assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z], "primal differs");
                 let h = 1e-3;
                 let mut s2 = store.clone();
                 s2.set("b.alpha.value", &[0.2 + h]).unwrap();
-                let fp = b.eval(&s2, &si::<f32>(wi), V3::cst(wo));
+                let fp = b.eval(&s2.primal(), &si::<f32>(wi), V3::cst(wo));
                 s2.set("b.alpha.value", &[0.2 - h]).unwrap();
-                let fm = b.eval(&s2, &si::<f32>(wi), V3::cst(wo));
+                let fm = b.eval(&s2.primal(), &si::<f32>(wi), V3::cst(wo));
                 let fd = (fp.y - fm.y) / (2.0 * h);
                 assert!(
                     (d.y.d - fd).abs() <= 0.01 * fd.abs() + 1e-3,
@@ -221,7 +222,7 @@ mod tests {
     fn detached_sampling_derivative_is_right_and_mixed_is_wrong() {
         use crate::testing::Pcg32;
         let alpha = 0.3f32;
-        let (b, mut store) = build(
+        let (b, store) = build(
             "roughconductor",
             &[
                 ("distribution", string("ggx")),
@@ -241,7 +242,7 @@ mod tests {
                 for j in 0..nphi {
                     let phi = (j as f32 + 0.5) / nphi as f32 * std::f32::consts::TAU;
                     let w = dir(z, phi);
-                    sum += (b.eval(store, &si::<f32>(wi), V3::cst(w)).y * h(w)) as f64;
+                    sum += (b.eval(&store.primal(), &si::<f32>(wi), V3::cst(w)).y * h(w)) as f64;
                 }
             }
             sum * std::f64::consts::TAU / (nz * nphi) as f64
@@ -254,13 +255,13 @@ mod tests {
         let jm = quad(&s2);
         let reference = (jp - jm) / (2.0 * eps as f64);
 
-        store.set_tangent("b.alpha.value", &[1.0]).unwrap();
+        let seeds = Seeds::tangents(&store, &[("b.alpha.value", &[1.0])]).unwrap();
         let mut rng = Pcg32::new(11);
         let n = 200_000;
         let (mut det, mut det2, mut mix, mut mix2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
         for _ in 0..n {
             let (u1, u2) = (rng.next_f32(), rng.next_2d());
-            let Some(bs) = b.sample::<Dual>(&store, &si::<Dual>(wi), u1, u2) else {
+            let Some(bs) = b.sample::<Dual>(&store.view(&seeds), &si::<Dual>(wi), u1, u2) else {
                 continue;
             };
             let hw = h(bs.wo.val()) as f64;
@@ -270,9 +271,9 @@ mod tests {
             let f = (bs.weight.y.v * bs.pdf) as f64;
             let df = bs.weight.y.d as f64 * bs.pdf as f64;
             s2.set("b.alpha.value", &[alpha + eps]).unwrap();
-            let pp = b.pdf(&s2, &si::<f32>(wi), bs.wo.val()) as f64;
+            let pp = b.pdf(&s2.primal(), &si::<f32>(wi), bs.wo.val()) as f64;
             s2.set("b.alpha.value", &[alpha - eps]).unwrap();
-            let pm = b.pdf(&s2, &si::<f32>(wi), bs.wo.val()) as f64;
+            let pm = b.pdf(&s2.primal(), &si::<f32>(wi), bs.wo.val()) as f64;
             let p = bs.pdf as f64;
             let dp = (pp - pm) / (2.0 * eps as f64);
             let m = (df * p - f * dp) / (p * p) * hw;

@@ -12,7 +12,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -79,7 +79,7 @@ impl BsdfT for RoughDielectric {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -119,7 +119,7 @@ impl BsdfT for RoughDielectric {
         }
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let wi = si.wi.val();
         let eta_p = store.value(self.eta, 0);
         let Some((m, reflect)) = Self::half_vector(wi, wo, eta_p) else {
@@ -146,7 +146,7 @@ impl BsdfT for RoughDielectric {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -182,7 +182,7 @@ impl BsdfT for RoughDielectric {
         smooth_sample(self, store, si, wo, eta, lobe)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         default_albedo(self, store, si)
     }
 }
@@ -284,8 +284,8 @@ mod tests {
         // f32 and Dual give identical primal values
         let wi = glam::Vec3::new(0.3, 0.1, 0.9).normalize();
         let wo = glam::Vec3::new(-0.2, -0.1, -0.95).normalize();
-        let a = b.eval(&store, &si::<f32>(wi), V3::cst(wo));
-        let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
+        let a = b.eval(&store.primal(), &si::<f32>(wi), V3::cst(wo));
+        let d = b.eval(&store.primal(), &si::<Dual>(wi), V3::cst(wo));
         assert_eq!(a.x, d.x.v);
     }
 }

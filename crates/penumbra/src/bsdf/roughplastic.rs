@@ -16,7 +16,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamStore};
+use crate::params::{ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -93,7 +93,7 @@ impl RoughPlastic {
         }
     }
 
-    fn distr<R: Real>(&self, store: &ParamStore) -> MicrofacetDistribution<R> {
+    fn distr<R: Real>(&self, store: &ParamView) -> MicrofacetDistribution<R> {
         let a = store.read::<R>(self.alpha, 0);
         MicrofacetDistribution::new(self.kind, a, a, self.sample_visible)
     }
@@ -244,7 +244,7 @@ impl BsdfT for RoughPlastic {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -278,7 +278,7 @@ impl BsdfT for RoughPlastic {
         spec + diff
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let wi = si.wi.val();
         if !(wi.z > 0.0 && wo.z > 0.0) {
             return 0.0;
@@ -297,7 +297,7 @@ impl BsdfT for RoughPlastic {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -326,7 +326,7 @@ impl BsdfT for RoughPlastic {
         smooth_sample(self, store, si, wo, 1.0, lobe)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.diffuse_reflectance.eval(store, si)
     }
 }
@@ -400,7 +400,7 @@ mod tests {
                 (p - p_ref).abs() <= tp * p_ref + 1e-7,
                 "{dist} pdf {p} vs {p_ref}"
             );
-            let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
+            let d = b.eval(&store.primal(), &si::<Dual>(wi), V3::cst(wo));
             assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z]);
         }
     }

@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::ParamStore;
+use crate::params::{ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
@@ -66,7 +66,7 @@ impl BsdfT for TwoSided {
 
     fn eval<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         wo: V3<R>,
     ) -> Spectrum<R> {
@@ -80,7 +80,7 @@ impl BsdfT for TwoSided {
         }
     }
 
-    fn pdf<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
+    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
         let z = si.wi.z.val();
         if z > 0.0 {
             self.front.pdf(store, si, wo)
@@ -93,7 +93,7 @@ impl BsdfT for TwoSided {
 
     fn sample<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u1: f32,
         u2: Vec2,
@@ -110,7 +110,7 @@ impl BsdfT for TwoSided {
         }
     }
 
-    fn albedo<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         if si.wi.z.val() >= 0.0 {
             self.front.albedo(store, si)
         } else {
@@ -169,7 +169,12 @@ mod tests {
             .id("m2.brdf_1.specular_reflectance.value")
             .is_some());
         let bs = b
-            .sample(&ctx.store, &si::<f32>(wi_b), 0.3, glam::Vec2::splat(0.3))
+            .sample(
+                &ctx.store.primal(),
+                &si::<f32>(wi_b),
+                0.3,
+                glam::Vec2::splat(0.3),
+            )
             .unwrap();
         assert!(
             (bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6,

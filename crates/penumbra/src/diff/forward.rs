@@ -7,29 +7,26 @@ use super::warn_missing_boundary_terms;
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
+use crate::params::{ParamView, Seeds};
 use crate::scene::Scene;
 
 /// The derivative image dI/dθ·t along the tangent `t` given per parameter
 /// key (each slice as long as the parameter). Parameters not listed have
 /// zero tangent. Uses the same random numbers as [`crate::integrator::render`]
 /// with the same options, so it is the derivative of that very estimate.
+/// The tangents live in this call, not in the scene.
 pub fn render_forward(
-    scene: &mut Scene,
+    scene: &Scene,
     tangents: &[(&str, &[f32])],
     opts: &RenderOptions,
 ) -> Result<Rendered> {
+    let seeds = Seeds::tangents(&scene.params, tangents)?;
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    let geometry_moves = warn_missing_boundary_terms(scene, &keys)?;
-    scene.params.clear_tangents();
-    for (key, t) in tangents {
-        scene.params.set_tangent(key, t)?;
-    }
-    let result = derivative_image(scene, opts, geometry_moves);
-    scene.params.clear_tangents();
-    result
+    warn_missing_boundary_terms(scene, &keys)?;
+    derivative_image(scene, &scene.params.view(&seeds), opts)
 }
 
-fn derivative_image(scene: &Scene, opts: &RenderOptions, geometry_moves: bool) -> Result<Rendered> {
+fn derivative_image(scene: &Scene, store: &ParamView, opts: &RenderOptions) -> Result<Rendered> {
     let integrator = &scene.integrator;
     if let Integrator::Aov(_) = integrator {
         return Err(Error::Invalid(
@@ -38,7 +35,7 @@ fn derivative_image(scene: &Scene, opts: &RenderOptions, geometry_moves: bool) -
     }
     let (block, non_finite_samples) =
         render_samples(scene, opts, 3, "forward mode", |cs, rng, out| {
-            if let Some(l) = integrator.radiance::<Dual>(scene, cs, rng, geometry_moves) {
+            if let Some(l) = integrator.radiance::<Dual>(scene, store, cs, rng) {
                 out.copy_from_slice(&[l.x.d, l.y.d, l.z.d]);
             }
         })?;

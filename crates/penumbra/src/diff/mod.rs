@@ -38,11 +38,7 @@ pub fn gradient_seed(seed: u64) -> u64 {
 /// biased wherever such an edge moves. Not an error: the interior term is
 /// exact in scenes where no edge moves, and is what users optimise with
 /// today; never silent.
-///
-/// Returns whether any of them moves geometry or the camera (the
-/// integrators then re-evaluate paths in a parameterisation that moves
-/// with it, see `crate::integrator::scatter`).
-pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<bool> {
+pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<()> {
     let mut moving = Vec::new();
     for key in keys {
         let id = scene.params.require(key)?;
@@ -53,7 +49,7 @@ pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Resul
     if !moving.is_empty() {
         crate::warn(missing_boundary_terms_message(&moving));
     }
-    Ok(!moving.is_empty())
+    Ok(())
 }
 
 /// The warning of [`warn_missing_boundary_terms`].
@@ -68,7 +64,52 @@ pub fn missing_boundary_terms_message(keys: &[&str]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::gradient_seed;
+    use super::*;
+    use crate::integrator::RenderOptions;
+    use std::path::Path;
+
+    /// The derivative state lives in the call: derivative calls with
+    /// different tangents and recorded parameters run at the same time on
+    /// one shared scene and give what they give one after the other.
+    #[test]
+    fn derivative_calls_share_a_scene() {
+        let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
+        let d = [("res".to_string(), "8".to_string())];
+        let scene = Scene::load_file(&cbox, &d).unwrap();
+        let opts = RenderOptions {
+            spp: Some(2),
+            ..Default::default()
+        };
+        let red = [("red.reflectance.value", &[1.0f32, 0.0, 0.0][..])];
+        let green = [("green.reflectance.value", &[0.0f32, 1.0, 0.0][..])];
+        let adjoint = vec![1.0f32; 8 * 8 * 3];
+        let keys = ["red.reflectance.value"];
+        let run_all = || {
+            std::thread::scope(|s| {
+                let a = s.spawn(|| render_forward(&scene, &red, &opts).unwrap().data);
+                let b = s.spawn(|| render_forward(&scene, &green, &opts).unwrap().data);
+                let c = s.spawn(|| {
+                    render_backward(&scene, &adjoint, Some(&keys), &opts)
+                        .unwrap()
+                        .entries[0]
+                        .data
+                        .clone()
+                });
+                (a.join().unwrap(), b.join().unwrap(), c.join().unwrap())
+            })
+        };
+        let (a, b, c) = run_all();
+        assert_eq!(a, render_forward(&scene, &red, &opts).unwrap().data);
+        assert_eq!(b, render_forward(&scene, &green, &opts).unwrap().data);
+        assert_ne!(a, b, "different tangents give different images");
+        let g = render_backward(&scene, &adjoint, Some(&keys), &opts).unwrap();
+        assert_eq!(c, g.entries[0].data);
+        // nothing stays behind: a primal render and an unseeded read see no
+        // derivative state
+        let id = scene.params.require("red.reflectance.value").unwrap();
+        assert!(!scene.params.primal().has_tangent(id));
+        assert!(!scene.params.primal().is_recorded(id));
+    }
 
     #[test]
     fn gradient_seeds_differ_from_every_small_image_seed() {

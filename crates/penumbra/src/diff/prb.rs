@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::image::ImageBlock;
 use crate::integrator::render::{report_non_finite, SampleLayout};
 use crate::integrator::{Integrator, RenderOptions};
-use crate::params::ParamId;
+use crate::params::{ParamId, ParamView, Seeds};
 use crate::scene::Scene;
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -72,8 +72,10 @@ type SampleGrads = Vec<(u32, u32, f64)>;
 /// by path replay with the same random numbers as
 /// [`crate::integrator::render`] with the same options. `keys` selects
 /// the parameters (default: every differentiable, non-geometric one).
+/// Which parameters are recorded, the tapes and the gradient sums live in
+/// this call, not in the scene.
 pub fn render_backward(
-    scene: &mut Scene,
+    scene: &Scene,
     d_image: &[f32],
     keys: Option<&[&str]>,
     opts: &RenderOptions,
@@ -118,22 +120,12 @@ pub fn render_backward(
             "the image gradient has a non-finite value at index {i}"
         )));
     }
-    let mut geometry_moves = false;
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            geometry_moves = warn_missing_boundary_terms(scene, keys)?;
+            warn_missing_boundary_terms(scene, keys)?;
             keys.iter()
-                .map(|k| {
-                    let id = scene.params.require(k)?;
-                    if !scene.params.get(id).flags.differentiable {
-                        return Err(Error::Param {
-                            key: k.to_string(),
-                            msg: "this parameter is not differentiable".into(),
-                        });
-                    }
-                    Ok(id)
-                })
-                .collect::<Result<_>>()?
+                .map(|k| scene.params.require(k))
+                .collect::<std::result::Result<_, _>>()?
         }
         None => scene
             .params
@@ -142,10 +134,9 @@ pub fn render_backward(
             .map(|(id, _)| id)
             .collect(),
     };
-    scene.params.set_grad_enabled(&ids);
-    let result = backward_pass(scene, &d_image, opts, geometry_moves);
-    scene.params.set_grad_enabled(&[]);
-    let (sums, non_finite_samples) = result?;
+    let seeds = Seeds::recorded(&scene.params, &ids)?;
+    let (sums, non_finite_samples) =
+        backward_pass(scene, &scene.params.view(&seeds), &d_image, opts)?;
     Ok(Gradients {
         non_finite_samples,
         entries: ids
@@ -164,9 +155,9 @@ pub fn render_backward(
 
 fn backward_pass(
     scene: &Scene,
+    store: &ParamView,
     d_image: &[f32],
     opts: &RenderOptions,
-    geometry_moves: bool,
 ) -> Result<(Vec<Vec<f64>>, usize)> {
     let layout = SampleLayout::new(scene, opts)?;
     layout.check_memory(scene, opts, 3, true)?;
@@ -206,7 +197,7 @@ fn backward_pass(
             clear_tape();
             let l = scene
                 .integrator
-                .radiance::<Var>(scene, cs, rng, geometry_moves)
+                .radiance::<Var>(scene, store, cs, rng)
                 .expect("path and direct integrators estimate radiance");
             if !l.val().is_finite() {
                 non_finite += 1;
@@ -231,8 +222,8 @@ fn backward_pass(
     let mut sums: Vec<Vec<f64>> = scene
         .params
         .iter()
-        .map(|(_, p)| {
-            if p.grad_enabled {
+        .map(|(id, p)| {
+            if store.is_recorded(id) {
                 vec![0.0; p.data.len()]
             } else {
                 Vec::new()
@@ -261,14 +252,14 @@ mod tests {
     fn an_adjoint_of_another_shape_is_an_error_naming_both_shapes() {
         let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
         let d = [("res".to_string(), "8".to_string())];
-        let mut scene = Scene::load_file(&cbox, &d).unwrap();
+        let scene = Scene::load_file(&cbox, &d).unwrap();
         let opts = RenderOptions {
             spp: Some(1),
             ..Default::default()
         };
         let keys = ["red.reflectance.value"];
         for (len, got) in [(8 * 8 * 4, "8×8×4"), (8 * 8 * 3 + 1, "193 values")] {
-            let e = render_backward(&mut scene, &vec![1.0; len], Some(&keys), &opts)
+            let e = render_backward(&scene, &vec![1.0; len], Some(&keys), &opts)
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -278,7 +269,7 @@ mod tests {
                 "{e}"
             );
         }
-        let g = render_backward(&mut scene, &[1.0; 8 * 8 * 3], Some(&keys), &opts).unwrap();
+        let g = render_backward(&scene, &[1.0; 8 * 8 * 3], Some(&keys), &opts).unwrap();
         assert_eq!(g.entries.len(), 1);
 
         // an rgba film takes its RGBA adjoint (alpha ignored) or an RGB one
@@ -286,15 +277,15 @@ mod tests {
         let rgb_format = "<string name=\"pixel_format\" value=\"rgb\"/>";
         assert!(text.contains(rgb_format));
         let text = text.replace(rgb_format, "<string name=\"pixel_format\" value=\"rgba\"/>");
-        let mut rgba = Scene::load_str(&text, &cbox, &d).unwrap();
+        let rgba = Scene::load_str(&text, &cbox, &d).unwrap();
         let rgb_adjoint = [0.5f32; 8 * 8 * 3];
         let rgba_adjoint: Vec<f32> = (0..8 * 8 * 4)
             .map(|i| if i % 4 == 3 { 7.0 } else { 0.5 })
             .collect();
-        let a = render_backward(&mut rgba, &rgb_adjoint, Some(&keys), &opts).unwrap();
-        let b = render_backward(&mut rgba, &rgba_adjoint, Some(&keys), &opts).unwrap();
+        let a = render_backward(&rgba, &rgb_adjoint, Some(&keys), &opts).unwrap();
+        let b = render_backward(&rgba, &rgba_adjoint, Some(&keys), &opts).unwrap();
         assert_eq!(a.entries[0].data, b.entries[0].data);
-        let e = render_backward(&mut rgba, &[1.0; 8 * 8 * 2], Some(&keys), &opts)
+        let e = render_backward(&rgba, &[1.0; 8 * 8 * 2], Some(&keys), &opts)
             .unwrap_err()
             .to_string();
         assert!(

@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
-use crate::params::ParamStore;
+use crate::params::{ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -41,7 +41,7 @@ impl Area {
     /// (Zhang et al. 2020, "Path-Space Differentiable Rendering", §4).
     pub fn sample_from_position<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ps: &PositionSample,
         y: SurfaceInteraction<R>,
         ref_p: V3<R>,
@@ -96,7 +96,7 @@ impl Area {
 impl EmitterT for Area {
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         shapes: &[Shape],
         ref_p: V3<R>,
         u: Vec2,
@@ -140,14 +140,14 @@ impl EmitterT for Area {
 
     /// Radiance towards `si.wi` if it is on the front side (shading frame
     /// cos θ > 0, as Mitsuba), else zero.
-    fn eval_surface<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         if !(si.wi.z.val() > 0.0) {
             return V3::zero();
         }
         self.radiance.eval(store, si)
     }
 
-    fn eval_environment<R: Real>(&self, _store: &ParamStore, _d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, _store: &ParamView, _d: Vec3) -> Spectrum<R> {
         V3::zero()
     }
     fn is_delta(&self) -> bool {
@@ -166,6 +166,7 @@ mod tests {
     use crate::emitter::EmitterSample;
     use crate::emitter::{surface_si, Emitter};
     use crate::math::V3;
+    use crate::params::Seeds;
     use crate::scene::Value;
     use crate::testing::Chi2Test;
 
@@ -232,13 +233,13 @@ mod tests {
             |rng| {
                 let ps = sample_rect(rng.next_2d());
                 let EmitterSample { ds, weight: w, .. } =
-                    a.sample_from_position::<f32>(s, &ps, ps_si(&ps), V3::cst(ref_p))?;
+                    a.sample_from_position::<f32>(&s.primal(), &ps, ps_si(&ps), V3::cst(ref_p))?;
                 let pdf = Area::pdf_from_area(1.0 / AREA, ref_p, ds.d, ds.p, ds.n);
                 assert!((pdf - ds.pdf).abs() <= 1e-4 * pdf);
                 assert!(!ds.delta && (ds.dist - (ds.p - ref_p).length()).abs() < 1e-5);
                 // weight = L / pdf, with L evaluated as a ray hitting ds.p sees it
                 let si = surface_si::<f32>(ds.p, ds.n, ps.uv, -ds.d, 3, 0);
-                let l = a.eval_surface(s, &si).val();
+                let l = a.eval_surface(&s.primal(), &si).val();
                 assert!((w.val() * pdf - l).abs().max_element() < 1e-4 * l.max_element());
                 Some(ds.d)
             },
@@ -259,7 +260,7 @@ mod tests {
         let behind = Vec3::new(0.0, 0.0, 2.0);
         assert!(a
             .sample_from_position::<f32>(
-                s,
+                &s.primal(),
                 &sample_rect(Vec2::splat(0.3)),
                 ps_si(&sample_rect(Vec2::splat(0.3))),
                 V3::cst(behind)
@@ -268,19 +269,25 @@ mod tests {
         assert_eq!(Area::pdf_from_area(1.0 / AREA, behind, -Vec3::Z, C, N), 0.0);
         let front = surface_si::<f32>(C, N, Vec2::ZERO, -Vec3::Z, 3, 0);
         let back = surface_si::<f32>(C, N, Vec2::ZERO, Vec3::Z, 3, 0);
-        assert_eq!(a.eval_surface(s, &front).val(), Vec3::new(4.0, 2.0, 1.0));
-        assert_eq!(a.eval_surface(s, &back).val(), Vec3::ZERO);
+        assert_eq!(
+            a.eval_surface(&s.primal(), &front).val(),
+            Vec3::new(4.0, 2.0, 1.0)
+        );
+        assert_eq!(a.eval_surface(&s.primal(), &back).val(), Vec3::ZERO);
     }
 
     #[test]
     fn radiance_key_and_derivative() {
-        let (a, mut ctx) = make();
-        ctx.store
-            .set_tangent("light.emitter.radiance.value", &[0.0, 0.0, 1.0])
-            .unwrap();
+        let (a, ctx) = make();
+        let seeds = Seeds::tangents(
+            &ctx.store,
+            &[("light.emitter.radiance.value", &[0.0, 0.0, 1.0])],
+        )
+        .unwrap();
+        let store = ctx.store.view(&seeds);
         let ps = sample_rect(Vec2::new(0.5, 0.5));
         let EmitterSample { ds, weight: w, .. } = a
-            .sample_from_position::<Dual>(&ctx.store, &ps, ps_si(&ps), V3::cst(Vec3::ZERO))
+            .sample_from_position::<Dual>(&store, &ps, ps_si(&ps), V3::cst(Vec3::ZERO))
             .unwrap();
         assert!((w.z.d - 1.0 / ds.pdf).abs() < 1e-5 && w.x.d == 0.0);
         // straight below the centre: pdf = dist² / (A cos θ) = 1/6

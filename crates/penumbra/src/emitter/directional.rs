@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
-use crate::params::ParamStore;
+use crate::params::ParamView;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -45,7 +45,7 @@ impl EmitterT for Directional {
     /// delta, infinite distance; `p` is outside the scene bounds).
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         _shapes: &[Shape],
         ref_p: V3<R>,
         _u: Vec2,
@@ -90,7 +90,7 @@ mod tests {
         let mut e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         e.set_scene_bounds(Vec3::ZERO, 3.0 * 3f32.sqrt());
         let EmitterSample { ds, weight: w, .. } = e
-            .sample_direction::<f32>(&ctx.store, &[], V3::cst(Vec3::ZERO), Vec2::ZERO)
+            .sample_direction::<f32>(&ctx.store.primal(), &[], V3::cst(Vec3::ZERO), Vec2::ZERO)
             .unwrap();
         assert_eq!(w.val(), Vec3::splat(2.0));
         assert_eq!(

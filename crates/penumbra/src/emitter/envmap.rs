@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
 use crate::math::{Distribution2D, Spectrum, Transform, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -163,7 +163,7 @@ impl Envmap {
     }
 
     /// Bilinear radiance (times scale) at texel-grid coordinates `g`.
-    fn lookup<R: Real>(&self, store: &ParamStore, g: Vec2) -> Spectrum<R> {
+    fn lookup<R: Real>(&self, store: &ParamView, g: Vec2) -> Spectrum<R> {
         let (w, h) = (self.width, self.height);
         let x0 = (g.x.floor() as usize).min(w - 1);
         let y0 = (g.y.floor() as usize).min(h - 2);
@@ -184,7 +184,7 @@ impl Envmap {
 impl EmitterT for Envmap {
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         _shapes: &[Shape],
         ref_p: V3<R>,
         u: Vec2,
@@ -238,13 +238,13 @@ impl EmitterT for Envmap {
         dist.pdf(s) / (2.0 * PI * PI * sin_theta.max(1e-7))
     }
 
-    fn eval_surface<R: Real>(&self, _: &ParamStore, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
     }
 
     /// Radiance seen looking along world direction `d` (the direction of
     /// a ray that escaped the scene).
-    fn eval_environment<R: Real>(&self, store: &ParamStore, d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R> {
         let local = self.to_local(d);
         self.lookup(store, self.uv_to_grid(Envmap::direction_to_uv(local)))
     }
@@ -264,6 +264,7 @@ mod tests {
     use crate::emitter::Emitter;
     use crate::emitter::EmitterSample;
     use crate::math::V3;
+    use crate::params::Seeds;
     use crate::scene::Value;
     use crate::testing::Chi2Test;
     use glam::{Mat4, Vec4};
@@ -295,7 +296,7 @@ mod tests {
             (Vec3::new(0.0, 1.0, 0.0), Vec3::new(2.5, 1.0, 0.0)),
             (Vec3::new(0.0, -1.0, 0.0), Vec3::new(2.5, 3.0, 0.0)),
         ] {
-            let got = e.eval_environment::<f32>(&ctx.store, d).val();
+            let got = e.eval_environment::<f32>(&ctx.store.primal(), d).val();
             assert!(
                 (got - want).abs().max_element() < 1e-4,
                 "{d}: {got} vs {want}"
@@ -321,13 +322,12 @@ mod tests {
         let d = Envmap::uv_to_direction(Vec2::new(0.3, 0.25));
         let mut t = vec![0.0; 36];
         t[(4 + 1) * 3] = 1.0; // texel (1, 1), red
-        ctx.store.set_tangent("env.data", &t).unwrap();
-        let l = e.eval_environment::<Dual>(&ctx.store, d);
+        let seeds = Seeds::tangents(&ctx.store, &[("env.data", &t)]).unwrap();
+        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), d);
         assert!((l.x.d - 2.0 * 0.7 * 0.5).abs() < 1e-4, "{l:?}");
         assert_eq!(l.y.d, 0.0);
-        ctx.store.clear_tangents();
-        ctx.store.set_tangent("env.scale", &[1.0]).unwrap();
-        let l = e.eval_environment::<Dual>(&ctx.store, d);
+        let seeds = Seeds::tangents(&ctx.store, &[("env.scale", &[1.0])]).unwrap();
+        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), d);
         assert!((l.x.d - l.x.v / 2.0).abs() < 1e-5, "{l:?}");
     }
 
@@ -362,9 +362,9 @@ mod tests {
             |rng| {
                 let EmitterSample {
                     ds, weight: wgt, ..
-                } = e.sample_direction::<f32>(s, &[], V3::cst(ref_p), rng.next_2d())?;
+                } = e.sample_direction::<f32>(&s.primal(), &[], V3::cst(ref_p), rng.next_2d())?;
                 let pdf = e.pdf_direction(s, &[], ref_p, ds.d, ds.p, ds.n);
-                let want = e.eval_environment::<f32>(s, ds.d).val() / pdf;
+                let want = e.eval_environment::<f32>(&s.primal(), ds.d).val() / pdf;
                 // f32 round-off in the direction (~1e-6) moves u by
                 // ~1e-6 / sin θ, and radiance changes by at most ~w · 6×
                 // per unit u on this map
@@ -408,14 +408,14 @@ mod tests {
         let mut n_ok = 0;
         for _ in 0..2000 {
             let Some(EmitterSample { ds, weight: w, .. }) =
-                e.sample_direction::<f32>(s, &[], V3::cst(Vec3::ZERO), rng.next_2d())
+                e.sample_direction::<f32>(&s.primal(), &[], V3::cst(Vec3::ZERO), rng.next_2d())
             else {
                 continue;
             };
             n_ok += 1;
             let pdf = e.pdf_direction(s, &[], Vec3::ZERO, ds.d, ds.p, ds.n);
             assert!((pdf - ds.pdf).abs() <= 2e-3 * pdf, "{pdf} vs {}", ds.pdf);
-            let l = e.eval_environment::<f32>(s, ds.d).val();
+            let l = e.eval_environment::<f32>(&s.primal(), ds.d).val();
             assert!((w.val() * pdf - l).abs().max_element() <= 2e-3 * l.max_element() + 1e-6);
             assert!((ds.p - Vec3::ONE).length() > 2.0);
         }

@@ -19,7 +19,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{Frame, Spectrum, Transform, V2, V3};
-use crate::params::{Domain, ParamId, ParamStore};
+use crate::params::{Domain, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -80,7 +80,7 @@ pub(crate) fn surface_si<R: Real>(
 /// A texture evaluated where position does not matter (uniform values of
 /// point, spot, directional and constant emitters): at uv = (0, 0).
 #[inline]
-pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamStore) -> Spectrum<R> {
+pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamView) -> Spectrum<R> {
     let si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
     t.eval(store, &si)
 }
@@ -162,14 +162,14 @@ macro_rules! delta_light_queries {
         }
         fn eval_surface<R: $crate::ad::Real>(
             &self,
-            _: &$crate::params::ParamStore,
+            _: &$crate::params::ParamView,
             _: &$crate::geometry::SurfaceInteraction<R>,
         ) -> $crate::math::Spectrum<R> {
             $crate::math::V3::zero()
         }
         fn eval_environment<R: $crate::ad::Real>(
             &self,
-            _: &$crate::params::ParamStore,
+            _: &$crate::params::ParamView,
             _: glam::Vec3,
         ) -> $crate::math::Spectrum<R> {
             $crate::math::V3::zero()
@@ -232,7 +232,7 @@ pub trait EmitterT {
     /// sample and `radiance / pdf` (visibility not included).
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         shapes: &[Shape],
         ref_p: V3<R>,
         u: Vec2,
@@ -250,10 +250,10 @@ pub trait EmitterT {
         n: Vec3,
     ) -> f32;
     /// Radiance leaving a surface emitter at `si` towards `si.wi`.
-    fn eval_surface<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
     /// Radiance arriving from infinity along ray direction `d` (environment
     /// emitters; zero for others).
-    fn eval_environment<R: Real>(&self, store: &ParamStore, d: Vec3) -> Spectrum<R>;
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R>;
     /// True for point, spot and directional emitters.
     fn is_delta(&self) -> bool;
     /// True for constant and envmap emitters.
@@ -288,7 +288,7 @@ impl EmitterT for Emitter {
     #[inline]
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         shapes: &[Shape],
         ref_p: V3<R>,
         u: Vec2,
@@ -308,11 +308,11 @@ impl EmitterT for Emitter {
         dispatch!(self, e => e.pdf_direction(store, shapes, ref_p, d, p, n))
     }
     #[inline]
-    fn eval_surface<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         dispatch!(self, e => e.eval_surface(store, si))
     }
     #[inline]
-    fn eval_environment<R: Real>(&self, store: &ParamStore, d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R> {
         dispatch!(self, e => e.eval_environment(store, d))
     }
     fn is_delta(&self) -> bool {

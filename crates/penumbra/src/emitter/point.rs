@@ -8,7 +8,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
-use crate::params::ParamStore;
+use crate::params::ParamView;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -37,7 +37,7 @@ impl EmitterT for Point {
     /// The light's position, with weight `I / dist²` (pdf 1, delta).
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         _shapes: &[Shape],
         ref_p: V3<R>,
         _u: Vec2,
@@ -61,6 +61,7 @@ mod tests {
     use crate::emitter::Emitter;
     use crate::emitter::EmitterSample;
     use crate::math::V3;
+    use crate::params::Seeds;
     use crate::scene::Value;
 
     #[test]
@@ -77,7 +78,7 @@ mod tests {
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         let ref_p = Vec3::new(0.0, 0.0, 3.0);
         let EmitterSample { ds, weight: w, .. } = e
-            .sample_direction::<f32>(&ctx.store, &[], V3::cst(ref_p), Vec2::splat(0.5))
+            .sample_direction::<f32>(&ctx.store.primal(), &[], V3::cst(ref_p), Vec2::splat(0.5))
             .unwrap();
         // Mitsuba: weight 0.5, d (0,0,-1), dist 2, pdf 1, delta
         assert_eq!(w.val(), Vec3::splat(0.5));
@@ -86,11 +87,15 @@ mod tests {
             (-Vec3::Z, 2.0, 1.0, true)
         );
         assert!(e.is_delta());
-        ctx.store
-            .set_tangent("lamp.intensity.value", &[1.0, 0.0, 0.0])
-            .unwrap();
+        let seeds =
+            Seeds::tangents(&ctx.store, &[("lamp.intensity.value", &[1.0, 0.0, 0.0])]).unwrap();
         let EmitterSample { weight: w, .. } = e
-            .sample_direction::<Dual>(&ctx.store, &[], V3::cst(ref_p), Vec2::splat(0.5))
+            .sample_direction::<Dual>(
+                &ctx.store.view(&seeds),
+                &[],
+                V3::cst(ref_p),
+                Vec2::splat(0.5),
+            )
             .unwrap();
         assert_eq!((w.x.d, w.y.d), (0.25, 0.0));
     }

@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::{Transform, V3};
-use crate::params::ParamStore;
+use crate::params::ParamView;
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -69,7 +69,7 @@ impl EmitterT for Spot {
     /// delta); `None` outside the cone.
     fn sample_direction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         _shapes: &[Shape],
         ref_p: V3<R>,
         _u: Vec2,
@@ -129,7 +129,7 @@ mod tests {
         ] {
             let a = deg.to_radians();
             let p = Vec3::new(2.0 * a.sin(), 0.0, 2.0 * a.cos());
-            let r = e.sample_direction::<f32>(&ctx.store, &[], V3::cst(p), Vec2::ZERO);
+            let r = e.sample_direction::<f32>(&ctx.store.primal(), &[], V3::cst(p), Vec2::ZERO);
             match (r, want) {
                 (Some(EmitterSample { ds, weight: w, .. }), Some(want)) => {
                     assert!(
@@ -167,7 +167,7 @@ mod tests {
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         assert!(e
             .sample_direction::<f32>(
-                &ctx.store,
+                &ctx.store.primal(),
                 &[],
                 V3::cst(Vec3::new(0.0, 0.0, 0.0)),
                 Vec2::ZERO
@@ -175,7 +175,7 @@ mod tests {
             .is_some());
         assert!(e
             .sample_direction::<f32>(
-                &ctx.store,
+                &ctx.store.primal(),
                 &[],
                 V3::cst(Vec3::new(0.0, 0.0, 10.0)),
                 Vec2::ZERO

@@ -875,7 +875,7 @@ mod tests {
                     }
                     // barycentrics reproduce the hit point
                     let si = shapes[h.shape as usize].surface_interaction::<f32>(
-                        store,
+                        &store.primal(),
                         &crate::geometry::DiffRay::cst(&ray),
                         &h,
                     );

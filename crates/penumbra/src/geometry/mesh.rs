@@ -35,7 +35,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use glam::{Vec2, Vec3};
 
 /// Mesh data as read from a file (object space), before validation.
@@ -413,7 +413,7 @@ impl Mesh {
 
     /// The change of `to_world` along its tangent (rows 0–2, value zero),
     /// if reads of it carry derivatives in `R`.
-    fn to_world_tangent<R: Real>(&self, store: &ParamStore) -> Option<[[R; 4]; 3]> {
+    fn to_world_tangent<R: Real>(&self, store: &ParamView) -> Option<[[R; 4]; 3]> {
         if !R::tracks(store, self.to_world_id) {
             return None;
         }
@@ -439,7 +439,7 @@ impl Mesh {
 
     /// The vertex indices and positions (in `R`) of triangle `prim`.
     #[inline(always)]
-    fn triangle_r<R: Real>(&self, store: &ParamStore, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
+    fn triangle_r<R: Real>(&self, store: &ParamView, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
         let [i0, i1, i2] = self.faces[prim as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
         let ps = idx.map(|i| store.read3(self.positions, i));
@@ -464,7 +464,7 @@ impl Mesh {
     /// positions read through the store.
     pub fn triangle_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
@@ -490,7 +490,7 @@ impl Mesh {
 
     /// The vertex normal of vertex `v` recomputed from the positions in `R`
     /// (the same formula as [`vertex_normals`]).
-    fn derived_normal<R: Real>(&self, store: &ParamStore, v: usize) -> V3<R> {
+    fn derived_normal<R: Real>(&self, store: &ParamView, v: usize) -> V3<R> {
         let mut acc = V3::zero();
         for &f in self.vertex_faces.of(v) {
             let face = self.faces[f as usize];
@@ -506,7 +506,7 @@ impl Mesh {
 
     /// The point of triangle `hit.prim` at the fixed barycentrics `hit.uv`,
     /// moving with the triangle's vertices; `wi` is left zero.
-    pub fn triangle_point<R: Real>(&self, store: &ParamStore, hit: &Hit) -> SurfaceInteraction<R> {
+    pub fn triangle_point<R: Real>(&self, store: &ParamView, hit: &Hit) -> SurfaceInteraction<R> {
         let (idx, [p0, p1, p2]) = self.triangle_r::<R>(store, hit.prim);
         let (b1, b2) = (R::cst(hit.uv.x), R::cst(hit.uv.y));
         let p = p0 * (R::cst(1.0) - b1 - b2) + p1 * b1 + p2 * b2;
@@ -519,7 +519,7 @@ impl Mesh {
     #[inline(always)]
     fn local_geometry<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         hit: &Hit,
         idx: [usize; 3],
         ps: [V3<R>; 3],
@@ -615,14 +615,14 @@ impl Mesh {
 impl ShapeT for Mesh {
     fn surface_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
         self.triangle_interaction(store, ray, hit)
     }
 
-    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, _p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, _p: Vec3) -> SurfaceInteraction<R> {
         self.triangle_point(store, hit)
     }
 
@@ -789,6 +789,7 @@ mod tests {
     use super::*;
     use crate::ad::Dual;
     use crate::geometry::{DiffRay, Ray};
+    use crate::params::Seeds;
 
     fn tet() -> MeshData {
         MeshData {
@@ -1028,7 +1029,7 @@ mod tests {
             prim: 3,
             uv: Vec2::ZERO,
         };
-        let si0 = m.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &hit);
+        let si0 = m.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &hit);
         let b = (si0.uv, si0.t);
         assert!(b.1 > 0.0);
         let base: Vec<f32> = store.data(m.positions).to_vec();
@@ -1036,13 +1037,13 @@ mod tests {
         for k in [3usize, 4, 5, 6, 7, 8, 9, 10, 11] {
             let mut tan = vec![0.0; base.len()];
             tan[k] = 1.0;
-            store.set_tangent("m.vertex_positions", &tan).unwrap();
-            let sd = m.surface_interaction::<Dual>(&store, &DiffRay::cst(&ray), &hit);
+            let seeds = Seeds::tangents(&store, &[("m.vertex_positions", &tan)]).unwrap();
+            let sd = m.surface_interaction::<Dual>(&store.view(&seeds), &DiffRay::cst(&ray), &hit);
             let eval = |store: &mut ParamStore, delta: f32| {
                 let mut p = base.clone();
                 p[k] += delta;
                 store.set("m.vertex_positions", &p).unwrap();
-                m.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &hit)
+                m.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &hit)
             };
             let sp = eval(&mut store, eps);
             let sm = eval(&mut store, -eps);
@@ -1074,8 +1075,8 @@ mod tests {
         // vertex 0 is not on face 3: zero derivative
         let mut tan = vec![0.0; base.len()];
         tan[0] = 1.0;
-        store.set_tangent("m.vertex_positions", &tan).unwrap();
-        let sd = m.surface_interaction::<Dual>(&store, &DiffRay::cst(&ray), &hit);
+        let seeds = Seeds::tangents(&store, &[("m.vertex_positions", &tan)]).unwrap();
+        let sd = m.surface_interaction::<Dual>(&store.view(&seeds), &DiffRay::cst(&ray), &hit);
         assert_eq!(sd.t.d, 0.0);
     }
 
@@ -1105,14 +1106,14 @@ mod tests {
             prim: 0,
             uv: Vec2::ZERO,
         };
-        let si = m.surface_interaction::<f32>(&s2, &DiffRay::cst(&ray), &hit);
+        let si = m.surface_interaction::<f32>(&s2.primal(), &DiffRay::cst(&ray), &hit);
         assert!((si.t - 5.0).abs() < 1e-5);
         assert!((si.p.val() - Vec3::new(0.2, 0.3, 0.0)).length() < 1e-6);
         // face 0 = (0,2,1): normal -z, barycentric uv without texcoords
         assert!((si.n.val() - -Vec3::Z).length() < 1e-6);
         assert!((si.uv.val() - Vec2::new(0.3, 0.2)).length() < 1e-6);
         assert!(si.wi.z < 0.0, "viewer on the back side: {:?}", si.wi);
-        let sf = mf.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &hit);
+        let sf = mf.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &hit);
         assert!((sf.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.sh_frame.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.wi.z - 1.0).abs() < 1e-5);

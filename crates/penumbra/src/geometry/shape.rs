@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::shapes::{self, Disk, Sphere};
 use crate::geometry::{DiffRay, Hit, PositionSample, SurfaceInteraction};
-use crate::params::{ParamId, ParamStore};
+use crate::params::{ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
@@ -20,7 +20,7 @@ pub trait ShapeT {
     /// bounces).
     fn surface_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R>;
@@ -29,7 +29,7 @@ pub trait ShapeT {
     /// point `p`), moving with the shape: the parameterisation of points
     /// sampled on a surface (Zhang et al. 2020, "Path-Space Differentiable
     /// Rendering", material form). `wi` is left zero.
-    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R>;
+    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R>;
     /// Samples a point uniformly with respect to surface area.
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample;
     /// Total surface area.
@@ -126,7 +126,7 @@ impl Shape {
     /// Whether reads of this shape's surface carry derivatives in `R` (a
     /// parameter that moves it is tracked): if not, its points are
     /// constants.
-    pub fn moves<R: Real>(&self, store: &ParamStore) -> bool {
+    pub fn moves<R: Real>(&self, store: &ParamView) -> bool {
         match self {
             Shape::Mesh(m) => R::tracks(store, m.positions) || R::tracks(store, m.to_world_id),
             Shape::Sphere(s) => {
@@ -162,7 +162,7 @@ impl ShapeT for Shape {
     #[inline]
     fn surface_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
@@ -173,7 +173,7 @@ impl ShapeT for Shape {
         }
     }
     #[inline]
-    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
         match self {
             Shape::Mesh(m) => m.point_at(store, hit, p),
             Shape::Sphere(s) => s.point_at(store, hit, p),
@@ -203,6 +203,7 @@ mod tests {
     use crate::error::SrcLoc;
     use crate::geometry::{DiffRay, Ray};
     use crate::math::Transform;
+    use crate::params::Seeds;
     use crate::scene::{Class, Prop, Value};
     use glam::{Mat4, Vec3};
     use std::f32::consts::PI;
@@ -280,7 +281,7 @@ mod tests {
         let store = &ctx.store;
         let ray = Ray::new(Vec3::new(1.0, 0.5, 5.0), -Vec3::Z);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
+        let si = s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         // local (0.5, 0.5) -> uv (0.75, 0.75)
         assert!(
@@ -299,7 +300,7 @@ mod tests {
         .unwrap();
         let ray = Ray::new(Vec3::new(0.5, 0.5, 5.0), -Vec3::Z);
         let h = hit_of(&s, &ctx.store, &ray);
-        let si = s.surface_interaction::<f32>(&ctx.store, &DiffRay::cst(&ray), &h);
+        let si = s.surface_interaction::<f32>(&ctx.store.primal(), &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         // world x = 0.5 is local x = -0.5
         assert!(
@@ -319,7 +320,7 @@ mod tests {
         for d in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z] {
             let ray = Ray::new(d * 5.0 + d.any_orthonormal_vector() * 0.3, -d);
             let h = hit_of(&s, store, &ray);
-            let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
+            let si = s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h);
             assert!((si.n.val() - d).length() < 1e-6, "{d}");
             assert!((si.sh_frame.n.val() - d).length() < 1e-6, "{d}");
             assert!((h.t - 4.0).abs() < 1e-5);
@@ -350,7 +351,7 @@ mod tests {
         let dir = Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos());
         let ray = Ray::new(c + dir * 3.0, -dir);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
+        let si = s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h);
         assert!((si.t - 2.5).abs() < 1e-5);
         assert!((si.n.val() - dir).length() < 1e-5);
         assert!((si.uv.val() - Vec2::new(ph / (2.0 * PI), th / PI)).length() < 1e-5);
@@ -358,7 +359,11 @@ mod tests {
         // φ < 0 wraps to [0, 2π)
         let dir2 = Vec3::new(0.0, -1.0, 0.0);
         let r2 = Ray::new(c + dir2 * 3.0, -dir2);
-        let si2 = s.surface_interaction::<f32>(store, &DiffRay::cst(&r2), &hit_of(&s, store, &r2));
+        let si2 = s.surface_interaction::<f32>(
+            &store.primal(),
+            &DiffRay::cst(&r2),
+            &hit_of(&s, store, &r2),
+        );
         assert!((si2.uv.x - 0.75).abs() < 1e-5, "{:?}", si2.uv);
         // flip_normals: inward
         let mut ctx = LoadContext::default();
@@ -369,7 +374,7 @@ mod tests {
         .unwrap();
         let r3 = Ray::new(Vec3::new(0.0, 0.0, 4.0), -Vec3::Z);
         let si3 = s.surface_interaction::<f32>(
-            &ctx.store,
+            &ctx.store.primal(),
             &DiffRay::cst(&r3),
             &hit_of(&s, &ctx.store, &r3),
         );
@@ -406,15 +411,14 @@ mod tests {
             let base = store.data(store.id(key).unwrap()).to_vec();
             let mut tan = vec![0.0; n];
             tan[k] = 1.0;
-            store.clear_tangents();
-            store.set_tangent(key, &tan).unwrap();
-            let sd = s.surface_interaction::<Dual>(store, &DiffRay::cst(&ray), &h);
+            let seeds = Seeds::tangents(store, &[(key, &tan)]).unwrap();
+            let sd = s.surface_interaction::<Dual>(&store.view(&seeds), &DiffRay::cst(&ray), &h);
             let eps = 1e-3;
             let mut ev = |delta: f32| {
                 let mut v = base.clone();
                 v[k] += delta;
                 store.set(key, &v).unwrap();
-                s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h)
+                s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h)
             };
             let (sp, sm) = (ev(eps), ev(-eps));
             store.set(key, &base).unwrap();
@@ -447,7 +451,7 @@ mod tests {
         assert!((s.surface_area() - 4.0 * PI).abs() < 1e-4);
         let ray = Ray::new(Vec3::new(0.0, -1.0, 5.0), -Vec3::Z);
         let h = hit_of(&s, store, &ray);
-        let si = s.surface_interaction::<f32>(store, &DiffRay::cst(&ray), &h);
+        let si = s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h);
         assert!((si.n.val() - Vec3::Z).length() < 1e-6);
         assert!(
             (si.uv.val() - Vec2::new(0.5, 0.75)).length() < 1e-5,

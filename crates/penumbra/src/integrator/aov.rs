@@ -112,9 +112,15 @@ impl AovIntegrator {
             n.sample(scene, cs, rng, &mut out[..c]);
             k = c;
         }
-        let ray = cs.ray::<f32>(&scene.params).val();
+        let store = scene.params.primal();
+        let ray = cs.ray::<f32>(&store).val();
         let hit = scene.intersect(&ray);
-        let si = hit.map(|h| (h, scene.surface_interaction::<f32>(&DiffRay::cst(&ray), &h)));
+        let si = hit.map(|h| {
+            (
+                h,
+                scene.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &h),
+            )
+        });
         for (_, kind) in &self.aovs {
             let vals: [f32; 3] = match &si {
                 None => [0.0; 3],
@@ -125,7 +131,7 @@ impl AovIntegrator {
                     AovKind::ShadingNormal => si.sh_frame.n.val().to_array(),
                     AovKind::Albedo => scene
                         .shape_bsdf(h.shape)
-                        .albedo(&scene.params, si)
+                        .albedo(&store, si)
                         .val()
                         .to_array(),
                     AovKind::Uv => [si.uv.x, si.uv.y, 0.0],

@@ -7,6 +7,7 @@ use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
+use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 use crate::sensor::CameraSample;
@@ -37,12 +38,11 @@ impl DirectIntegrator {
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
+        store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-        geometry_moves: bool,
     ) -> Spectrum<R> {
-        let store = &scene.params;
-        let camera_ray = cs.ray_if::<R>(store, geometry_moves);
+        let camera_ray = cs.ray_if_moving::<R>(store);
         let ray = camera_ray.val();
         let Some(hit) = scene.intersect(&ray) else {
             return match scene.environment {
@@ -52,7 +52,7 @@ impl DirectIntegrator {
                 _ => Spectrum::zero(),
             };
         };
-        let si = scene.surface_interaction::<R>(&camera_ray, &hit);
+        let si = scene.surface_interaction::<R>(store, &camera_ray, &hit);
         let mut result = Spectrum::<R>::zero();
         if let Some(em) = scene.shape_emitter(hit.shape) {
             if !self.hide_emitters {
@@ -64,7 +64,7 @@ impl DirectIntegrator {
         if bsdf.flags().has(BsdfFlags::SMOOTH) {
             for _ in 0..self.emitter_samples {
                 let u = rng.next_2d();
-                if let Some(es) = scene.sample_emitter_direction::<R>(&si, u) {
+                if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u) {
                     let wo = si.to_local(es.d);
                     let f = bsdf.eval(store, &si, wo);
                     let w = if es.ds.delta {
@@ -83,7 +83,7 @@ impl DirectIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 continue;
             };
-            let b = scatter(scene, bsdf, &si, &bs, geometry_moves);
+            let b = scatter(scene, store, bsdf, &si, &bs);
             let d = b.ray.d;
             let (le, em_pdf) = match (b.hit, b.next) {
                 (Some(h2), Some(si2)) => match scene.shape_emitter(h2.shape) {

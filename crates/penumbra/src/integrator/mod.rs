@@ -17,6 +17,7 @@ use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::Spectrum;
 use crate::math::V3;
+use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 use crate::sensor::CameraSample;
@@ -73,7 +74,7 @@ impl Integrator {
             return a.sample(scene, cs, rng, out);
         }
         let rgb = self
-            .radiance::<f32>(scene, cs, rng, false)
+            .radiance::<f32>(scene, &scene.params.primal(), cs, rng)
             .expect("path and direct integrators estimate radiance");
         out[..3].copy_from_slice(&rgb.val().to_array());
     }
@@ -81,20 +82,21 @@ impl Integrator {
     /// The radiance estimate through camera sample `cs` in `R` (primal for
     /// f32, derivatives for dual numbers and recorded variables); `None` for
     /// the AOV integrator, which estimates no radiance of its own.
-    /// `geometry_moves`: derivatives are taken with respect to parameters
-    /// that move surfaces or the camera, so the path is re-evaluated in the
-    /// parameterisation of [`scatter`]; otherwise nothing moves and the
-    /// sampled weights are used as they are.
+    /// Parameters are read through `store`, the scene's values with the
+    /// derivative state of the call; when a differentiated parameter moves
+    /// surfaces or the camera ([`ParamView::moves_geometry`]) the path is
+    /// re-evaluated in the parameterisation of [`scatter`], otherwise
+    /// nothing moves and the sampled weights are used as they are.
     pub fn radiance<R: Real>(
         &self,
         scene: &Scene,
+        store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-        geometry_moves: bool,
     ) -> Option<Spectrum<R>> {
         match self {
-            Integrator::Path(p) => Some(p.sample::<R>(scene, cs, rng, geometry_moves)),
-            Integrator::Direct(d) => Some(d.sample::<R>(scene, cs, rng, geometry_moves)),
+            Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng)),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
             Integrator::Aov(_) => None,
         }
     }
@@ -132,21 +134,20 @@ pub(crate) struct Bounce<R> {
 ///   normal: the ray leaves the attached point along the attached
 ///   direction, and the next vertex slides along it.
 ///
-/// When no geometry moves (`geometry_moves` false: material and emitter
-/// parameters only) both forms reduce to the sample's own weight and the
+/// When no geometry moves (material and emitter parameters only) both forms reduce to the sample's own weight and the
 /// point where the ray hits, which is what this returns then.
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
+    store: &ParamView,
     bsdf: &Bsdf,
     si: &SurfaceInteraction<R>,
     bs: &BsdfSample<R>,
-    geometry_moves: bool,
 ) -> Bounce<R> {
     let delta = bs.lobe.has(BsdfFlags::DELTA);
     let d = si.to_world(bs.wo).normalize();
     let ray = si.spawn_ray(d.val());
     let hit = scene.intersect(&ray);
-    if delta || !geometry_moves || !R::DIFFERENTIABLE {
+    if delta || !store.moves_geometry() || !R::DIFFERENTIABLE {
         let dray = DiffRay {
             o: si.p,
             d,
@@ -156,14 +157,14 @@ pub(crate) fn scatter<R: Real>(
         return Bounce {
             ray,
             hit,
-            next: hit.map(|h| scene.surface_interaction(&dray, &h)),
+            next: hit.map(|h| scene.surface_interaction(store, &dray, &h)),
             weight: bs.weight,
             delta,
         };
     }
     let (next, wo, jacobian) = match hit {
         Some(h) => {
-            let mut next = scene.point_at::<R>(&h, ray.at(h.t));
+            let mut next = scene.point_at::<R>(store, &h, ray.at(h.t));
             let to = next.p - si.p;
             let dist2 = to.length_squared();
             let wo = to / dist2.sqrt();
@@ -174,7 +175,7 @@ pub(crate) fn scatter<R: Real>(
         // towards the environment (at infinity): the direction is the constant
         None => (None, d, R::cst(1.0)),
     };
-    let f = bsdf.eval(&scene.params, si, si.to_local(wo));
+    let f = bsdf.eval(store, si, si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
     let attach = |w: R, f: R| {
         if f.val() != 0.0 {

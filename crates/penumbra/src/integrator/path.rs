@@ -8,6 +8,7 @@ use crate::bsdf::{BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
+use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 use crate::sensor::CameraSample;
@@ -43,12 +44,11 @@ impl PathIntegrator {
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
+        store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-        geometry_moves: bool,
     ) -> Spectrum<R> {
-        let store = &scene.params;
-        let camera_ray = cs.ray_if::<R>(store, geometry_moves);
+        let camera_ray = cs.ray_if_moving::<R>(store);
         let mut result = Spectrum::<R>::zero();
         let mut throughput = Spectrum::<R>::splat(R::cst(1.0));
         let mut eta = 1.0f32;
@@ -59,7 +59,7 @@ impl PathIntegrator {
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
         let mut hit = scene.intersect(&ray);
-        let mut vertex = hit.map(|h| scene.surface_interaction::<R>(&camera_ray, &h));
+        let mut vertex = hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h));
         let mut depth = 0u32;
         loop {
             let (Some(h), Some(si)) = (hit, vertex) else {
@@ -110,7 +110,7 @@ impl PathIntegrator {
             // next-event estimation
             let u_light = rng.next_2d();
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
-                if let Some(es) = scene.sample_emitter_direction::<R>(&si, u_light) {
+                if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u_light) {
                     let wo = si.to_local(es.d);
                     let f = bsdf.eval(store, &si, wo);
                     if !f.is_zero() {
@@ -130,7 +130,7 @@ impl PathIntegrator {
             let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
                 return result;
             };
-            let bounce = scatter(scene, bsdf, &si, &bs, geometry_moves);
+            let bounce = scatter(scene, store, bsdf, &si, &bs);
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;

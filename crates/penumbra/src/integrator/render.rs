@@ -84,7 +84,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
                 integrator.sample(scene, cs, rng, rest);
                 let k = 3.min(n);
                 out[..k].copy_from_slice(&rest[..k]);
-                let ray = cs.ray::<f32>(&scene.params).val();
+                let ray = cs.ray::<f32>(&scene.params.primal()).val();
                 out[k] = if scene.intersect(&ray).is_some() {
                     1.0
                 } else {
@@ -396,8 +396,7 @@ mod tests {
         assert!(e.contains("GiB are available"), "{e}");
         assert!(e.contains("--force") && e.contains("force=True"), "{e}");
         // forward mode shares the check
-        let mut scene = scene;
-        let e = crate::diff::render_forward(&mut scene, &[], &RenderOptions::default())
+        let e = crate::diff::render_forward(&scene, &[], &RenderOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("needs about"), "{e}");

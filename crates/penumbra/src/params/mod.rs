@@ -2,8 +2,10 @@
 //! flat, named f32 buffer, keyed like Mitsuba's `traverse()` keys
 //! (`"red.reflectance.value"`, `"plane.bsdf.reflectance.data"`,
 //! `"obj.vertex_positions"`). Components keep [`ParamId`]s and read values
-//! as `R: Real` through [`ParamStore::read`], so that forward-mode seeding
-//! and reverse-mode tagging happen in one place.
+//! as `R: Real` through a [`ParamView`]: the scene's values together with
+//! the [`Seeds`] of one derivative call (tangents in forward mode, the
+//! recorded parameters in reverse mode), so that seeding and tagging happen
+//! in one place and the derivative state never lives in the scene.
 
 use crate::ad::Real;
 use crate::error::Error;
@@ -95,13 +97,8 @@ pub struct Param {
     pub shape: Vec<usize>,
     pub flags: ParamFlags,
     pub domain: Domain,
-    /// Tangent (forward-mode direction), same length as `data`, if set.
-    pub tangent: Option<Vec<f32>>,
     /// Set by [`ParamStore::set`]; cleared when dependants were updated.
     pub dirty: bool,
-    /// Reverse mode records reads of this parameter (set by
-    /// `render_backward` for the parameters whose gradients it returns).
-    pub grad_enabled: bool,
 }
 
 /// All parameters of a scene.
@@ -143,9 +140,7 @@ impl ParamStore {
             shape,
             flags,
             domain,
-            tangent: None,
             dirty: false,
-            grad_enabled: false,
         });
         Ok(id)
     }
@@ -155,29 +150,15 @@ impl ParamStore {
         self.params[id.0 as usize].data[i]
     }
 
-    #[inline(always)]
-    pub fn tangent(&self, id: ParamId, i: usize) -> f32 {
-        match &self.params[id.0 as usize].tangent {
-            Some(t) => t[i],
-            None => 0.0,
-        }
+    /// A view of the values without derivatives (primal renders, and
+    /// reads outside of a derivative call).
+    pub fn primal(&self) -> ParamView<'_> {
+        self.view(&NO_SEEDS)
     }
 
-    /// Element `i` of parameter `id` as `R` (seeded or tagged for
-    /// differentiation according to `R`).
-    #[inline(always)]
-    pub fn read<R: Real>(&self, id: ParamId, i: usize) -> R {
-        R::from_param(self, id, i)
-    }
-
-    /// Elements `3i, 3i+1, 3i+2` as a vector (RGB values, positions).
-    #[inline(always)]
-    pub fn read3<R: Real>(&self, id: ParamId, i: usize) -> V3<R> {
-        V3::new(
-            self.read(id, 3 * i),
-            self.read(id, 3 * i + 1),
-            self.read(id, 3 * i + 2),
-        )
+    /// A view of the values with the derivative state `seeds`.
+    pub fn view<'a>(&'a self, seeds: &'a Seeds) -> ParamView<'a> {
+        ParamView { store: self, seeds }
     }
 
     pub fn id(&self, key: &str) -> Option<ParamId> {
@@ -301,53 +282,6 @@ impl ParamStore {
         Ok(())
     }
 
-    /// Sets the forward-mode tangent of `key` (same length as its data).
-    pub fn set_tangent(&mut self, key: &str, tangent: &[f32]) -> Result<(), Error> {
-        let id = self.require(key)?;
-        let p = &mut self.params[id.0 as usize];
-        if !p.flags.differentiable {
-            return Err(Error::Param {
-                key: key.into(),
-                msg: "this parameter is not differentiable".into(),
-            });
-        }
-        if tangent.len() != p.data.len() {
-            return Err(Error::Param {
-                key: key.into(),
-                msg: format!(
-                    "tangent needs {} values (shape {:?}), got {}",
-                    p.data.len(),
-                    p.shape,
-                    tangent.len()
-                ),
-            });
-        }
-        if let Some(i) = tangent.iter().position(|v| !v.is_finite()) {
-            return Err(Error::Param {
-                key: key.into(),
-                msg: format!("tangent element {i} is not finite"),
-            });
-        }
-        p.tangent = Some(tangent.to_vec());
-        Ok(())
-    }
-
-    /// Enables reverse-mode recording for exactly the parameters in `ids`.
-    pub fn set_grad_enabled(&mut self, ids: &[ParamId]) {
-        for p in &mut self.params {
-            p.grad_enabled = false;
-        }
-        for id in ids {
-            self.params[id.0 as usize].grad_enabled = true;
-        }
-    }
-
-    pub fn clear_tangents(&mut self) {
-        for p in &mut self.params {
-            p.tangent = None;
-        }
-    }
-
     /// Keys of the parameters marked dirty since the last call; clears them.
     pub fn take_dirty(&mut self) -> Vec<ParamId> {
         let mut out = Vec::new();
@@ -358,6 +292,157 @@ impl ParamStore {
             }
         }
         out
+    }
+}
+
+/// The derivative state of one derivative call: per parameter, its
+/// forward-mode tangent, or whether reverse mode records its reads. The
+/// call owns it (`render_forward`, `render_backward`), so a scene is shared
+/// read-only by renders and derivative calls alike.
+#[derive(Clone, Debug, Default)]
+pub struct Seeds {
+    /// Indexed by [`ParamId`]; `None` is a zero tangent.
+    tangents: Vec<Option<Vec<f32>>>,
+    /// Indexed by [`ParamId`].
+    recorded: Vec<bool>,
+    /// A seeded parameter moves geometry or the camera.
+    moves_geometry: bool,
+}
+
+static NO_SEEDS: Seeds = Seeds {
+    tangents: Vec::new(),
+    recorded: Vec::new(),
+    moves_geometry: false,
+};
+
+impl Seeds {
+    /// Forward mode along `tangents` (key, one value per element of the
+    /// parameter); parameters not listed have zero tangent. Checks keys,
+    /// lengths, finiteness and that each parameter is differentiable.
+    pub fn tangents(store: &ParamStore, tangents: &[(&str, &[f32])]) -> Result<Seeds, Error> {
+        let mut seeds = Seeds::default();
+        seeds.tangents.resize(store.len(), None);
+        for (key, t) in tangents {
+            let id = store.require(key)?;
+            let p = store.get(id);
+            require_differentiable(key, p)?;
+            if t.len() != p.data.len() {
+                return Err(Error::Param {
+                    key: key.to_string(),
+                    msg: format!(
+                        "tangent needs {} values (shape {:?}), got {}",
+                        p.data.len(),
+                        p.shape,
+                        t.len()
+                    ),
+                });
+            }
+            if let Some(i) = t.iter().position(|v| !v.is_finite()) {
+                return Err(Error::Param {
+                    key: key.to_string(),
+                    msg: format!("tangent element {i} is not finite"),
+                });
+            }
+            seeds.tangents[id.0 as usize] = Some(t.to_vec());
+            seeds.moves_geometry |= p.flags.discontinuous;
+        }
+        Ok(seeds)
+    }
+
+    /// Reverse mode records the reads of exactly the parameters `ids`
+    /// (each must be differentiable).
+    pub fn recorded(store: &ParamStore, ids: &[ParamId]) -> Result<Seeds, Error> {
+        let mut seeds = Seeds::default();
+        seeds.recorded.resize(store.len(), false);
+        for &id in ids {
+            let p = store.get(id);
+            require_differentiable(&p.key, p)?;
+            seeds.recorded[id.0 as usize] = true;
+            seeds.moves_geometry |= p.flags.discontinuous;
+        }
+        Ok(seeds)
+    }
+
+    /// Whether reverse mode records reads of `id`.
+    pub fn is_recorded(&self, id: ParamId) -> bool {
+        self.recorded.get(id.0 as usize).copied().unwrap_or(false)
+    }
+
+    /// Whether a seeded parameter moves geometry or the camera (flag
+    /// `discontinuous`): paths are then re-evaluated in the
+    /// parameterisation of `integrator::scatter`.
+    pub fn moves_geometry(&self) -> bool {
+        self.moves_geometry
+    }
+}
+
+fn require_differentiable(key: &str, p: &Param) -> Result<(), Error> {
+    if p.flags.differentiable {
+        Ok(())
+    } else {
+        Err(Error::Param {
+            key: key.into(),
+            msg: "this parameter is not differentiable".into(),
+        })
+    }
+}
+
+/// What rendering code reads parameters through: the scene's values and
+/// the [`Seeds`] of the call. Dereferences to the store for everything
+/// else (`data`, `get`, `value`).
+#[derive(Clone, Copy, Debug)]
+pub struct ParamView<'a> {
+    store: &'a ParamStore,
+    seeds: &'a Seeds,
+}
+
+impl<'a> ParamView<'a> {
+    /// The forward-mode tangent of element `i` of `id` (0 if none is set).
+    #[inline(always)]
+    pub fn tangent(&self, id: ParamId, i: usize) -> f32 {
+        match self.seeds.tangents.get(id.0 as usize) {
+            Some(Some(t)) => t[i],
+            _ => 0.0,
+        }
+    }
+
+    /// Whether a tangent is set for `id`.
+    pub fn has_tangent(&self, id: ParamId) -> bool {
+        matches!(self.seeds.tangents.get(id.0 as usize), Some(Some(_)))
+    }
+
+    /// Whether reverse mode records reads of `id`.
+    pub fn is_recorded(&self, id: ParamId) -> bool {
+        self.seeds.is_recorded(id)
+    }
+
+    /// See [`Seeds::moves_geometry`].
+    pub fn moves_geometry(&self) -> bool {
+        self.seeds.moves_geometry
+    }
+
+    /// Element `i` of parameter `id` as `R` (seeded or tagged for
+    /// differentiation according to `R`).
+    #[inline(always)]
+    pub fn read<R: Real>(&self, id: ParamId, i: usize) -> R {
+        R::from_param(self, id, i)
+    }
+
+    /// Elements `3i, 3i+1, 3i+2` as a vector (RGB values, positions).
+    #[inline(always)]
+    pub fn read3<R: Real>(&self, id: ParamId, i: usize) -> V3<R> {
+        V3::new(
+            self.read(id, 3 * i),
+            self.read(id, 3 * i + 1),
+            self.read(id, 3 * i + 2),
+        )
+    }
+}
+
+impl std::ops::Deref for ParamView<'_> {
+    type Target = ParamStore;
+    fn deref(&self) -> &ParamStore {
+        self.store
     }
 }
 
@@ -441,12 +526,11 @@ mod tests {
                 Domain::UnitInterval,
             )
             .unwrap();
-        s.set_tangent("red.reflectance.value", &[1.0, 0.0, 2.0])
-            .unwrap();
-        assert_eq!(s.read::<f32>(id, 2), 0.1);
-        assert_eq!(s.read::<Dual>(id, 2), Dual::new(0.1, 2.0));
-        s.clear_tangents();
-        assert_eq!(s.read::<Dual>(id, 2), Dual::new(0.1, 0.0));
+        let seeds = Seeds::tangents(&s, &[("red.reflectance.value", &[1.0, 0.0, 2.0])]).unwrap();
+        let view = s.view(&seeds);
+        assert_eq!(view.read::<f32>(id, 2), 0.1);
+        assert_eq!(view.read::<Dual>(id, 2), Dual::new(0.1, 2.0));
+        assert_eq!(s.primal().read::<Dual>(id, 2), Dual::new(0.1, 0.0));
     }
 
     #[test]

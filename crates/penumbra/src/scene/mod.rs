@@ -8,7 +8,7 @@ pub use props::{Class, Node, Prop, Value};
 pub use xml::{child_key, parse_file, parse_str};
 
 use crate::error::{Error, Result};
-use crate::params::ParamStore;
+use crate::params::{ParamStore, ParamView};
 use crate::texture::Texture;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -129,17 +129,23 @@ impl Scene {
     #[inline]
     pub fn surface_interaction<R: Real>(
         &self,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
-        self.shapes[hit.shape as usize].surface_interaction(&self.params, ray, hit)
+        self.shapes[hit.shape as usize].surface_interaction(store, ray, hit)
     }
 
     /// Re-evaluates a hit in `R` as a point that moves with its shape (see
     /// [`ShapeT::point_at`]); `p` is the primal hit point.
     #[inline]
-    pub fn point_at<R: Real>(&self, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
-        self.shapes[hit.shape as usize].point_at(&self.params, hit, p)
+    pub fn point_at<R: Real>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
+        self.shapes[hit.shape as usize].point_at(store, hit, p)
     }
 
     #[inline]
@@ -158,12 +164,13 @@ impl Scene {
     /// `R` following `si.p` and the emitter, or `None` if occluded.
     pub fn sample_emitter_direction<R: Real>(
         &self,
+        store: &ParamView,
         si: &SurfaceInteraction<R>,
         u: Vec2,
     ) -> Option<EmitterSample<R>> {
         let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
         let u = Vec2::new(ux, u.y);
-        let mut es = self.emitters[i].sample_direction::<R>(&self.params, &self.shapes, si.p, u)?;
+        let mut es = self.emitters[i].sample_direction::<R>(store, &self.shapes, si.p, u)?;
         if !(es.ds.pdf > 0.0) {
             return None;
         }

@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::geometry::DiffRay;
 use crate::image::{Film, ReconstructionFilter};
 use crate::math::{Transform, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::sampler::{Independent, Sampler};
 use crate::scene::{Class, Node};
 use glam::{Mat4, Vec2};
@@ -45,8 +45,8 @@ impl CameraSample<'_> {
     /// The camera ray in `R` if geometry or the camera moves, else its
     /// primal value as a constant (cheaper: nothing to differentiate).
     #[inline]
-    pub fn ray_if<R: Real>(&self, store: &ParamStore, geometry_moves: bool) -> DiffRay<R> {
-        if geometry_moves {
+    pub fn ray_if_moving<R: Real>(&self, store: &ParamView) -> DiffRay<R> {
+        if store.moves_geometry() {
             self.ray(store)
         } else {
             DiffRay::cst(&self.ray::<f32>(store).val())
@@ -55,7 +55,7 @@ impl CameraSample<'_> {
 
     /// The camera ray of this sample, in `R`.
     #[inline]
-    pub fn ray<R: Real>(&self, store: &ParamStore) -> DiffRay<R> {
+    pub fn ray<R: Real>(&self, store: &ParamView) -> DiffRay<R> {
         self.sensor.ray(store, self.film, self.lens)
     }
 }
@@ -90,7 +90,7 @@ enum Pose {
 pub(crate) struct ToWorld<R>([R; 16]);
 
 impl<R: Real> ToWorld<R> {
-    fn read(pose: &Pose, store: &ParamStore) -> Self {
+    fn read(pose: &Pose, store: &ParamView) -> Self {
         ToWorld(match pose {
             Pose::Param(id) => std::array::from_fn(|i| store.read(*id, i)),
             Pose::Fixed(t) => {
@@ -215,7 +215,7 @@ impl Sensor {
     /// (0,0) = top-left) and lens position `lens` ∈ [0,1]², in `R`: origin
     /// and direction follow the sensor's parameters (see [`CameraSample`]).
     #[inline]
-    pub fn ray<R: Real>(&self, store: &ParamStore, film: Vec2, lens: Vec2) -> DiffRay<R> {
+    pub fn ray<R: Real>(&self, store: &ParamView, film: Vec2, lens: Vec2) -> DiffRay<R> {
         let to_world = ToWorld::read(&self.pose, store);
         match &self.camera {
             Camera::Perspective(c) => c.ray(store, &to_world, film),
@@ -348,7 +348,7 @@ impl Frustum {
     /// `pos` ∈ [0,1]², as Mitsuba maps it: film x grows towards camera −x
     /// ("left" is +x), film y downwards.
     #[inline(always)]
-    fn direction<R: Real>(&self, store: &ParamStore, pos: Vec2) -> V3<R> {
+    fn direction<R: Real>(&self, store: &ParamView, pos: Vec2) -> V3<R> {
         // `to_radians` spelled out, as the same f32 operations
         let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
         let [ox, oy] = self.principal_point_offset.map(|id| store.read::<R>(id, 0));

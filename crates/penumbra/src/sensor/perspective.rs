@@ -7,7 +7,7 @@ use super::{Frustum, ToWorld};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::DiffRay;
-use crate::params::ParamStore;
+use crate::params::{ParamStore, ParamView};
 use crate::scene::Node;
 use glam::Vec2;
 
@@ -29,7 +29,7 @@ impl Perspective {
     #[inline]
     pub(crate) fn ray<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         to_world: &ToWorld<R>,
         pos: Vec2,
     ) -> DiffRay<R> {

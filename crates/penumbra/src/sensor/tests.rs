@@ -4,6 +4,7 @@
 use crate::ad::Dual;
 use crate::geometry::DiffRay;
 use crate::integrator::{render, RenderOptions};
+use crate::params::Seeds;
 use crate::scene::Scene;
 use glam::{Mat3, Vec2, Vec3};
 use std::path::Path;
@@ -121,10 +122,10 @@ const SAMPLES: [(Vec2, Vec2); 3] = [
 /// ε·|f| / h ≈ 6e-8 · 4 / 1e-2 ≈ 2.5e-5. The bound leaves a factor of
 /// ten over both, and a wrong chain rule (a dropped or doubled term) is
 /// off by the size of the derivative itself, far above it.
-fn check(mut scene: Scene, key: &str, tangent: &[f32], h: f32) {
+fn check(scene: Scene, key: &str, tangent: &[f32], h: f32) {
     let id = scene.params.require(key).unwrap();
     let base = scene.params.data(id).to_vec();
-    scene.params.set_tangent(key, tangent).unwrap();
+    let seeds = Seeds::tangents(&scene.params, &[(key, tangent)]).unwrap();
     let shifted = |s: f32| {
         let mut store = scene.params.clone();
         let v: Vec<f32> = base.iter().zip(tangent).map(|(b, t)| b + s * t).collect();
@@ -135,8 +136,8 @@ fn check(mut scene: Scene, key: &str, tangent: &[f32], h: f32) {
     let sensor = &scene.sensors[0];
     let mut largest = 0.0f32;
     for (film, lens) in SAMPLES {
-        let ad: DiffRay<Dual> = sensor.ray(&scene.params, film, lens);
-        let primal = sensor.ray::<f32>(&scene.params, film, lens);
+        let ad: DiffRay<Dual> = sensor.ray(&scene.params.view(&seeds), film, lens);
+        let primal = sensor.ray::<f32>(&scene.params.primal(), film, lens);
         assert_eq!(
             ad.val().o,
             primal.o.val(),
@@ -148,8 +149,8 @@ fn check(mut scene: Scene, key: &str, tangent: &[f32], h: f32) {
             "{key}: Dual and f32 primal differ"
         );
         let (p, m) = (
-            sensor.ray::<f32>(&plus, film, lens),
-            sensor.ray::<f32>(&minus, film, lens),
+            sensor.ray::<f32>(&plus.primal(), film, lens),
+            sensor.ray::<f32>(&minus.primal(), film, lens),
         );
         for (what, a, p, m) in [("origin", ad.o, p.o, m.o), ("direction", ad.d, p.d, m.d)] {
             for (k, (a, (p, m))) in [a.x, a.y, a.z]
@@ -319,10 +320,10 @@ fn with_to_world_places_a_copy_that_ignores_the_parameter() {
     )
     .unwrap();
     s.sensors[0] = s.sensors[0].with_to_world(t);
-    s.params.set_tangent("cam.to_world", &[1.0; 16]).unwrap();
+    let seeds = Seeds::tangents(&s.params, &[("cam.to_world", &[1.0; 16])]).unwrap();
     let (film, lens) = SAMPLES[0];
-    let ray: DiffRay<Dual> = s.sensors[0].ray(&s.params, film, lens);
-    let want = there.sensors[0].ray::<f32>(&there.params, film, lens);
+    let ray: DiffRay<Dual> = s.sensors[0].ray(&s.params.view(&seeds), film, lens);
+    let want = there.sensors[0].ray::<f32>(&there.params.primal(), film, lens);
     assert_eq!(ray.val().o, want.o.val());
     assert_eq!(ray.val().d, want.d.val());
     for c in [ray.o, ray.d] {

@@ -9,7 +9,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::math::{warp, V3};
-use crate::params::{Domain, ParamId, ParamStore};
+use crate::params::{Domain, ParamId, ParamStore, ParamView};
 use crate::scene::Node;
 use glam::Vec2;
 
@@ -53,7 +53,7 @@ impl ThinLens {
     #[inline]
     pub(crate) fn ray<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         to_world: &ToWorld<R>,
         pos: Vec2,
         lens: Vec2,

@@ -8,7 +8,7 @@ use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
 use crate::image::{read_image, srgb_to_linear};
 use crate::math::{Spectrum, Transform, V2, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 
 /// Texel filter of a bitmap lookup (`filter_type`).
@@ -54,7 +54,7 @@ impl WrapMode {
 /// Reads a `to_uv` transform parameter (3×3 affine, row-major, stored as
 /// `<key>.to_uv`) and applies it to `uv`.
 #[inline]
-pub(crate) fn apply_to_uv<R: Real>(store: &ParamStore, id: ParamId, uv: V2<R>) -> V2<R> {
+pub(crate) fn apply_to_uv<R: Real>(store: &ParamView, id: ParamId, uv: V2<R>) -> V2<R> {
     let m = |i| store.value(id, i);
     V2::new(
         uv.x * m(0) + uv.y * m(1) + m(2),
@@ -193,7 +193,7 @@ impl Bitmap {
 
     /// Texel (x, y) (already wrapped) as RGB, read through the store.
     #[inline]
-    fn texel<R: Real>(&self, store: &ParamStore, x: usize, y: usize) -> Spectrum<R> {
+    fn texel<R: Real>(&self, store: &ParamView, x: usize, y: usize) -> Spectrum<R> {
         let i = y * self.width + x;
         if self.channels == 3 {
             store.read3(self.data, i)
@@ -203,7 +203,7 @@ impl Bitmap {
     }
 
     /// The filtered value at texture coordinates `uv` (after `to_uv`).
-    pub fn lookup<R: Real>(&self, store: &ParamStore, uv: V2<R>) -> Spectrum<R> {
+    pub fn lookup<R: Real>(&self, store: &ParamView, uv: V2<R>) -> Spectrum<R> {
         let (w, h) = (self.width, self.height);
         match self.filter {
             FilterType::Nearest => {
@@ -230,12 +230,12 @@ impl Bitmap {
 }
 
 impl TextureT for Bitmap {
-    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.lookup(store, apply_to_uv(store, self.to_uv, si.uv))
     }
     /// The value (monochrome data) or its luminance (RGB data), as
     /// Mitsuba 3's bitmap `eval_1`.
-    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         let v = self.eval(store, si);
         if self.channels == 3 {
             v.luminance()
@@ -260,6 +260,7 @@ impl TextureT for Bitmap {
 mod tests {
     use super::*;
     use crate::ad::Dual;
+    use crate::params::Seeds;
     use crate::scene::{Class, Value};
     use crate::texture::{si_at_uv, test_node, Texture};
     use glam::Vec3;
@@ -293,7 +294,7 @@ mod tests {
     }
 
     fn at(b: &Bitmap, ctx: &LoadContext, u: f32, v: f32) -> Vec3 {
-        b.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val()
+        b.eval::<f32>(&ctx.store.primal(), &si_at_uv(u, v)).val()
     }
 
     fn close(a: Vec3, b: Vec3) -> bool {
@@ -327,7 +328,7 @@ mod tests {
             assert!(close(got, want), "uv ({u}, {v}): {got} vs {want}");
         }
         // eval_1 of RGB data is its luminance (Mitsuba's bitmap eval_1)
-        let l = b.eval_1::<f32>(&ctx.store, &si_at_uv(0.125, 1.0 / 6.0));
+        let l = b.eval_1::<f32>(&ctx.store.primal(), &si_at_uv(0.125, 1.0 / 6.0));
         assert!(
             (l - (0.212671 + 7.15160 + 0.5 * 0.072169)).abs() < 1e-4,
             "{l}"
@@ -373,7 +374,7 @@ mod tests {
 
     #[test]
     fn texel_derivatives_are_the_bilinear_weights() {
-        let (b, mut ctx) = make(FilterType::Bilinear, WrapMode::Repeat, Transform::IDENTITY);
+        let (b, ctx) = make(FilterType::Bilinear, WrapMode::Repeat, Transform::IDENTITY);
         // x = 1.3 (columns 1, 2; weights 0.7, 0.3), y = 0.8 (rows 0, 1; 0.2, 0.8)
         let (u, v) = (1.8 / 4.0, 1.3 / 3.0);
         let n = 4 * 3 * 3;
@@ -389,8 +390,8 @@ mod tests {
             for c in 0..3 {
                 let mut t = vec![0.0; n];
                 t[(y * 4 + x) * 3 + c] = 1.0;
-                ctx.store.set_tangent("tex.data", &t).unwrap();
-                let r = b.eval::<Dual>(&ctx.store, &si_at_uv(u, v));
+                let seeds = Seeds::tangents(&ctx.store, &[("tex.data", &t)]).unwrap();
+                let r = b.eval::<Dual>(&ctx.store.view(&seeds), &si_at_uv(u, v));
                 for k in 0..3 {
                     let want = if k == c { w } else { 0.0 };
                     assert!(
@@ -404,8 +405,8 @@ mod tests {
         // eval_1 (luminance) derivative: weight × luminance coefficient
         let mut t = vec![0.0; n];
         t[(4 + 1) * 3 + 1] = 1.0; // texel (1, 1), green
-        ctx.store.set_tangent("tex.data", &t).unwrap();
-        let l = b.eval_1::<Dual>(&ctx.store, &si_at_uv(u, v));
+        let seeds = Seeds::tangents(&ctx.store, &[("tex.data", &t)]).unwrap();
+        let l = b.eval_1::<Dual>(&ctx.store.view(&seeds), &si_at_uv(u, v));
         assert!((l.d - 0.56 * 0.715160).abs() < 1e-5, "{l:?}");
     }
 
@@ -442,7 +443,9 @@ mod tests {
             );
             let mut ctx = LoadContext::default();
             let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
-            let got = t.eval::<f32>(&ctx.store, &si_at_uv(0.25, 0.25)).val();
+            let got = t
+                .eval::<f32>(&ctx.store.primal(), &si_at_uv(0.25, 0.25))
+                .val();
             assert!(close(got, want), "raw {raw}: {got} vs {want}");
             let p = ctx.store.get(ctx.store.require("tex.data").unwrap());
             assert_eq!(p.shape, vec![2, 2, 3]);
@@ -457,7 +460,9 @@ mod tests {
         );
         let mut ctx = LoadContext::default();
         let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
-        let got = t.eval::<f32>(&ctx.store, &si_at_uv(0.5, 0.25)).val();
+        let got = t
+            .eval::<f32>(&ctx.store.primal(), &si_at_uv(0.5, 0.25))
+            .val();
         assert!(
             close(got, Vec3::new(0.107_93, 0.027_152, 0.788_79)),
             "{got}"
@@ -514,7 +519,7 @@ mod tests {
         let (x, y) = (img.width / 3, img.height / 2);
         let u = (x as f32 + 0.5) / img.width as f32;
         let v = (y as f32 + 0.5) / img.height as f32;
-        let got = t.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val();
+        let got = t.eval::<f32>(&ctx.store.primal(), &si_at_uv(u, v)).val();
         let c = |k: usize| img.get(x, y, k.min(img.channels - 1));
         let want = if img.channels >= 3 {
             Vec3::new(c(0), c(1), c(2))
@@ -579,9 +584,9 @@ mod tests {
         .unwrap();
         let si = si_at_uv(0.5, 0.5);
         assert!(close(
-            b.eval::<f32>(&ctx.store, &si).val(),
+            b.eval::<f32>(&ctx.store.primal(), &si).val(),
             Vec3::splat(0.5)
         ));
-        assert!((b.eval_1::<f32>(&ctx.store, &si) - 0.5).abs() < 1e-6);
+        assert!((b.eval_1::<f32>(&ctx.store.primal(), &si) - 0.5).abs() < 1e-6);
     }
 }

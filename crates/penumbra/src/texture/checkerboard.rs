@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
-use crate::params::{Domain, ParamId, ParamStore};
+use crate::params::{Domain, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 
 /// Mitsuba 3.9.1's checkerboard `eval_1` returns `color1` where `eval`
@@ -44,7 +44,7 @@ impl Checkerboard {
 
     /// True where `color0` applies.
     #[inline]
-    fn is_color0<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> bool {
+    fn is_color0<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> bool {
         let uv = apply_to_uv(store, self.to_uv, si.uv).val();
         let (fu, fv) = (uv.x - uv.x.floor(), uv.y - uv.y.floor());
         (fu > 0.5) == (fv > 0.5)
@@ -52,14 +52,14 @@ impl Checkerboard {
 }
 
 impl TextureT for Checkerboard {
-    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         if self.is_color0(store, si) {
             self.color0.eval(store, si)
         } else {
             self.color1.eval(store, si)
         }
     }
-    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         if self.is_color0(store, si) != MITSUBA_EVAL1_SWAPS_COLORS {
             self.color0.eval_1(store, si)
         } else {
@@ -127,7 +127,7 @@ mod tests {
             }
             let want = if (i + j).rem_euclid(2) == 0 { c0 } else { c1 };
             n0 += usize::from(want == c0);
-            let got = t.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val();
+            let got = t.eval::<f32>(&ctx.store.primal(), &si_at_uv(u, v)).val();
             assert!(
                 (got - want).abs().max_element() < 1e-6,
                 "uv ({u}, {v}): {got} vs {want}"
@@ -152,7 +152,7 @@ mod tests {
                     0.75 * (i as f32 + 0.5) / n as f32,
                     0.75 * (j as f32 + 0.5) / n as f32,
                 );
-                sum += t.eval::<f32>(&ctx.store, &si_at_uv(u, v)).val().x as f64;
+                sum += t.eval::<f32>(&ctx.store.primal(), &si_at_uv(u, v)).val().x as f64;
             }
         }
         let want = 5.0 / 9.0 * 0.4 + 4.0 / 9.0 * 0.2;
@@ -177,12 +177,12 @@ mod tests {
             ((1.25, -0.25), 0.2),
             ((-0.25, -0.25), 0.4),
         ] {
-            let e = t.eval::<f32>(s, &si_at_uv(u, v)).val();
+            let e = t.eval::<f32>(&s.primal(), &si_at_uv(u, v)).val();
             assert!(
                 (e - glam::Vec3::splat(want)).abs().max_element() < 1e-6,
                 "({u},{v}) {e}"
             );
-            let e1 = t.eval_1::<f32>(s, &si_at_uv(u, v));
+            let e1 = t.eval_1::<f32>(&s.primal(), &si_at_uv(u, v));
             let want1 = if MITSUBA_EVAL1_SWAPS_COLORS {
                 0.6 - want
             } else {
@@ -213,9 +213,13 @@ mod tests {
         let mut ctx = LoadContext::default();
         let t = Texture::from_node(&node, Domain::Finite, &mut ctx).unwrap();
         // uv (0.3, 0.1) -> (0.6, 0.2): color1
-        let e = t.eval::<f32>(&ctx.store, &si_at_uv(0.3, 0.1)).val();
+        let e = t
+            .eval::<f32>(&ctx.store.primal(), &si_at_uv(0.3, 0.1))
+            .val();
         assert_eq!(e, glam::Vec3::new(0.0, 0.0, 1.0));
-        let e = t.eval::<f32>(&ctx.store, &si_at_uv(0.3, 0.3)).val();
+        let e = t
+            .eval::<f32>(&ctx.store.primal(), &si_at_uv(0.3, 0.3))
+            .val();
         assert_eq!(e, glam::Vec3::new(1.0, 0.0, 0.0));
     }
 }

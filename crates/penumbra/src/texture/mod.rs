@@ -14,16 +14,16 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
-use crate::params::{Domain, ParamStore};
+use crate::params::{Domain, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node, Value};
 
 /// What every texture plugin provides.
 pub trait TextureT {
     /// RGB value at the interaction's uv.
-    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
     /// Scalar value at the interaction's uv (first channel, or the
     /// luminance-free mean for RGB data, as Mitsuba's `eval_1`).
-    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R;
+    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R;
     /// Mean over the texture (for sampling heuristics), primal only.
     fn mean(&self, store: &ParamStore) -> f32;
     /// Largest value over the texture, primal only.
@@ -40,7 +40,7 @@ pub enum Texture {
 
 impl TextureT for Texture {
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         match self {
             Texture::Uniform(t) => t.eval(store, si),
             Texture::Bitmap(t) => t.eval(store, si),
@@ -48,7 +48,7 @@ impl TextureT for Texture {
         }
     }
     #[inline]
-    fn eval_1<R: Real>(&self, store: &ParamStore, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         match self {
             Texture::Uniform(t) => t.eval_1(store, si),
             Texture::Bitmap(t) => t.eval_1(store, si),

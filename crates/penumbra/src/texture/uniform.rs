@@ -5,7 +5,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::LoadContext;
 use glam::Vec3;
 
@@ -43,14 +43,14 @@ impl Uniform {
 
 impl TextureT for Uniform {
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamStore, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
         match self.channels {
             Channels::Mono => V3::splat(store.read(self.id, 0)),
             Channels::Rgb => store.read3(self.id, 0),
         }
     }
     #[inline]
-    fn eval_1<R: Real>(&self, store: &ParamStore, _si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> R {
         match self.channels {
             Channels::Mono => store.read(self.id, 0),
             Channels::Rgb => store.read3::<R>(self.id, 0).mean(),

@@ -11,7 +11,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Transform, V2, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -134,7 +134,7 @@ impl Disk {
 impl ShapeT for Disk {
     fn surface_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
@@ -159,7 +159,7 @@ impl ShapeT for Disk {
 
     /// The point with the primal point's local disk coordinates, moving
     /// with `to_world`.
-    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
         let f = self.frame(store);
         let nv = f.a0.cross(f.a1);
         let q = p - f.c;
@@ -198,7 +198,7 @@ impl ShapeT for Disk {
 
 impl Disk {
     /// Centre and images of the local x and y axes, in `R`.
-    fn frame_r<R: Real>(&self, store: &ParamStore) -> (V3<R>, V3<R>, V3<R>) {
+    fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, V3<R>, V3<R>) {
         let id = self.to_world;
         let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
         (

@@ -17,7 +17,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, V2, V3};
-use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::f32::consts::PI;
@@ -132,7 +132,7 @@ impl Sphere {
     /// Centre, radius and the images of the local axes (unit), in `R`:
     /// from `to_world` when its reads carry derivatives, else from
     /// `center` and `radius` with the rotation a constant.
-    fn frame_r<R: Real>(&self, store: &ParamStore) -> (V3<R>, R, [V3<R>; 3]) {
+    fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, R, [V3<R>; 3]) {
         if R::tracks(store, self.to_world) {
             let m = |r: usize, c: usize| -> R { store.read(self.to_world, 4 * r + c) };
             let col = |c: usize| V3::new(m(0, c), m(1, c), m(2, c));
@@ -206,7 +206,7 @@ fn placement(c: Vec3, r: f32, rot: Mat3) -> Vec<f32> {
 impl ShapeT for Sphere {
     fn surface_interaction<R: Real>(
         &self,
-        store: &ParamStore,
+        store: &ParamView,
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
@@ -238,7 +238,7 @@ impl ShapeT for Sphere {
     /// The point at the primal point's direction from the centre, in the
     /// sphere's local frame: it moves with the centre and scales with the
     /// radius.
-    fn point_at<R: Real>(&self, store: &ParamStore, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
         let (c, r, axes) = self.frame_r::<R>(store);
         let local = self.rot.transpose() * (p - c.val()).normalize();
         let dir = axes[0] * R::cst(local.x) + axes[1] * R::cst(local.y) + axes[2] * R::cst(local.z);
