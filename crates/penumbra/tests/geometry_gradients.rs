@@ -283,6 +283,69 @@ fn plane_translated_under_an_environment_map() {
     check("plane ⟂ (envmap)", &xml, "plane.vertex_positions", up, 1e-3);
 }
 
+const ENVMAP: &str =
+    r#"<emitter type="envmap"><string name="filename" value="textures/museum.exr"/></emitter>"#;
+
+/// A smooth environment (the test texture, about a texel per pixel of
+/// the views below): the museum's sharp highlights make the finite
+/// differences of a turning view depend on the step (the image sum's
+/// difference quotient changes by 20 % from ε = 3e-4 to 1e-2).
+const SMOOTH_ENVMAP: &str =
+    r#"<emitter type="envmap"><string name="filename" value="textures/texture.exr"/></emitter>"#;
+
+/// Environment lookups follow the direction looked along: the camera
+/// turning in front of the environment alone, and a mirror tilted under
+/// it (the direction after a delta bounce is attached).
+#[test]
+fn environment_seen_by_a_turning_camera_and_in_a_tilting_mirror() {
+    let fov = r#"<float name="fov" value="40"/>"#;
+    let sky = scene_xml(
+        EMITTER_SAMPLING,
+        &camera_sensor("perspective", fov),
+        SMOOTH_ENVMAP,
+    );
+    check(
+        "camera turned (envmap)",
+        &sky,
+        "camera.to_world",
+        |m| turn_about_local_axis(m, 1),
+        1e-3,
+    );
+    let mirror = r#"<shape type="rectangle" id="mirror">
+            <transform name="to_world"><scale value="10"/></transform>
+            <bsdf type="conductor"/>
+        </shape>"#;
+    let xml = scene_xml(
+        &path_integrator(2),
+        &camera_sensor("perspective", fov),
+        &format!("{mirror}{SMOOTH_ENVMAP}"),
+    );
+    check(
+        "mirror tilted (envmap)",
+        &xml,
+        "mirror.vertex_positions",
+        |p| rotation(p, [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        1e-3,
+    );
+}
+
+/// Shading normals turning under an environment map, by full path
+/// tracing: emitter samples and BSDF samples reach the environment along
+/// world directions that do not move (the same map for both MIS
+/// strategies, see `integrator::scatter`).
+#[test]
+fn vertex_normals_rotated_under_an_environment_map() {
+    let xml = ply_plane_scene()
+        .replace(EMITTER_SAMPLING, &path_integrator(2))
+        .replace(&light(CONSTANT_RADIANCE), ENVMAP);
+    check_in_expectation(
+        "vertex normals (envmap, paths)",
+        &xml,
+        "plane.vertex_normals",
+        |n| translation(n.len(), [0.3, 0.0, 0.0]),
+    );
+}
+
 #[test]
 fn plane_translated_under_a_textured_area_emitter() {
     let xml = area_light_scene(EMITTER_SAMPLING, TEXTURED_RADIANCE);
@@ -593,7 +656,21 @@ fn mesh_to_world() {
 /// A camera (id `camera`) of type `kind` at (0, −1.5, 3) looking at the
 /// origin, over the textured plane lit by a point light.
 fn camera_scene(kind: &str, extra: &str) -> String {
-    let sensor = format!(
+    let light = r#"<emitter type="point">
+            <point name="position" value="0.5, -0.5, 1.5"/>
+            <rgb name="intensity" value="6"/>
+        </emitter>"#;
+    scene_xml(
+        EMITTER_SAMPLING,
+        &camera_sensor(kind, extra),
+        &format!("{PLANE}{light}"),
+    )
+}
+
+/// A camera (id `camera`) of type `kind` at (0, −1.5, 3) looking at the
+/// origin.
+fn camera_sensor(kind: &str, extra: &str) -> String {
+    format!(
         r#"<sensor type="{kind}" id="camera">
             {extra}
             <transform name="to_world">
@@ -605,12 +682,7 @@ fn camera_scene(kind: &str, extra: &str) -> String {
                 <rfilter type="box"/>
             </film>
         </sensor>"#
-    );
-    let light = r#"<emitter type="point">
-            <point name="position" value="0.5, -0.5, 1.5"/>
-            <rgb name="intensity" value="6"/>
-        </emitter>"#;
-    scene_xml(EMITTER_SAMPLING, &sensor, &format!("{PLANE}{light}"))
+    )
 }
 
 #[test]

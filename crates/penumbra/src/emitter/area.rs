@@ -147,7 +147,7 @@ impl EmitterT for Area {
         self.radiance.eval(store, si)
     }
 
-    fn eval_environment<R: Real>(&self, _store: &ParamView, _d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, _store: &ParamView, _d: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
     fn is_delta(&self) -> bool {

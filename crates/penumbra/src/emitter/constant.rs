@@ -68,7 +68,7 @@ impl EmitterT for Constant {
     fn eval_surface<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
     }
-    fn eval_environment<R: Real>(&self, store: &ParamView, _d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, store: &ParamView, _d: V3<R>) -> Spectrum<R> {
         eval_uniform::<R>(&self.radiance, store)
     }
     fn is_delta(&self) -> bool {
@@ -114,7 +114,7 @@ mod tests {
                 assert!((ds.pdf - 1.0 / (4.0 * PI)).abs() < 1e-7);
                 assert!(!ds.delta && ds.dist.is_infinite());
                 // weight = radiance / pdf, and pdf_direction agrees
-                let want = e.eval_environment::<f32>(&s.primal(), ds.d).val() / ds.pdf;
+                let want = e.eval_environment::<f32>(&s.primal(), V3::cst(ds.d)).val() / ds.pdf;
                 assert!((w.val() - want).abs().max_element() < 1e-4 * want.max_element());
                 assert_eq!(e.pdf_direction(s, &[], ref_p, ds.d, ds.p, ds.n), ds.pdf);
                 // the sample point lies along d, outside the unit sphere
@@ -139,7 +139,7 @@ mod tests {
             .sample_direction::<Dual>(&store, &[], V3::cst(Vec3::ZERO), Vec2::new(0.2, 0.7))
             .unwrap();
         assert!((w.y.d - 4.0 * PI).abs() < 1e-4 && w.x.d == 0.0);
-        let l = e.eval_environment::<Dual>(&store, Vec3::X);
+        let l = e.eval_environment::<Dual>(&store, V3::cst(Vec3::X));
         assert_eq!((l.y.v, l.y.d), (2.0, 1.0));
     }
 }

@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
-use crate::math::{Distribution2D, Spectrum, Transform, V3};
+use crate::math::{Distribution2D, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Vec2, Vec3};
@@ -137,10 +137,10 @@ impl Envmap {
 
     /// Local direction → (u, v) in [0,1)×[0,1] (Mitsuba's convention).
     #[inline]
-    pub fn direction_to_uv(d: Vec3) -> Vec2 {
+    pub fn direction_to_uv<R: Real>(d: V3<R>) -> V2<R> {
         let u = d.x.atan2(-d.z) * (0.5 / PI);
-        let v = d.y.clamp(-1.0, 1.0).acos() / PI;
-        Vec2::new(u - u.floor(), v)
+        let v = d.y.acos() / PI;
+        V2::new(u - u.val().floor(), v)
     }
 
     /// (u, v) → unit local direction.
@@ -154,30 +154,33 @@ impl Envmap {
     /// Texel-grid coordinates of (u, v): x in [0, w) (periodic), y in
     /// [0, h−1].
     #[inline]
-    fn uv_to_grid(&self, uv: Vec2) -> Vec2 {
+    fn uv_to_grid<R: Real>(&self, uv: V2<R>) -> V2<R> {
         let x = uv.x - 0.5 / self.width as f32;
-        Vec2::new(
-            (x - x.floor()) * self.width as f32,
+        V2::new(
+            (x - x.val().floor()) * self.width as f32,
             uv.y.clamp(0.0, 1.0) * (self.height - 1) as f32,
         )
     }
 
-    /// Bilinear radiance (times scale) at texel-grid coordinates `g`.
-    fn lookup<R: Real>(&self, store: &ParamView, g: Vec2) -> Spectrum<R> {
+    /// Bilinear radiance (times scale) at texel-grid coordinates `g`; the
+    /// bilinear weights are differentiable in `g` (the direction looked
+    /// along moves when the camera or a mirror does).
+    fn lookup<R: Real>(&self, store: &ParamView, g: V2<R>) -> Spectrum<R> {
         let (w, h) = (self.width, self.height);
-        let x0 = (g.x.floor() as usize).min(w - 1);
-        let y0 = (g.y.floor() as usize).min(h - 2);
+        let x0 = (g.x.val().floor() as usize).min(w - 1);
+        let y0 = (g.y.val().floor() as usize).min(h - 2);
         let (fx, fy) = (g.x - x0 as f32, g.y - y0 as f32);
         let x1 = (x0 + 1) % w;
         let t = |x: usize, y: usize| store.read3::<R>(self.data, y * w + x);
-        let top = t(x0, y0).scale(1.0 - fx) + t(x1, y0).scale(fx);
-        let bottom = t(x0, y0 + 1).scale(1.0 - fx) + t(x1, y0 + 1).scale(fx);
+        let one = R::cst(1.0);
+        let top = t(x0, y0) * (one - fx) + t(x1, y0) * fx;
+        let bottom = t(x0, y0 + 1) * (one - fx) + t(x1, y0 + 1) * fx;
         let s: R = store.read(self.scale, 0);
-        (top.scale(1.0 - fy) + bottom.scale(fy)) * s
+        (top * (one - fy) + bottom * fy) * s
     }
 
-    fn to_local(&self, d: Vec3) -> Vec3 {
-        self.to_world.inverse().vector(d).normalize()
+    fn to_local<R: Real>(&self, d: V3<R>) -> V3<R> {
+        self.to_world.inverse().vector_r(d).normalize()
     }
 }
 
@@ -207,7 +210,7 @@ impl EmitterT for Envmap {
             .vector(Envmap::uv_to_direction(uv))
             .normalize();
         let g = Vec2::new(s.x * w, s.y * (self.height - 1) as f32);
-        let l = self.lookup::<R>(store, g);
+        let l = self.lookup::<R>(store, V2::cst(g));
         let ds = DirectionSample {
             p: far_point(&self.bounds, ref_p.val(), d),
             n: -d,
@@ -231,8 +234,10 @@ impl EmitterT for Envmap {
         let Some(dist) = &self.distribution else {
             return 0.0;
         };
-        let local = self.to_local(d);
-        let g = self.uv_to_grid(Envmap::direction_to_uv(local));
+        let local = self.to_local(V3::<f32>::cst(d)).val();
+        let g = self
+            .uv_to_grid(Envmap::direction_to_uv(V3::<f32>::cst(local)))
+            .val();
         let s = Vec2::new(g.x / self.width as f32, g.y / (self.height - 1) as f32);
         let sin_theta = (local.x * local.x + local.z * local.z).sqrt();
         dist.pdf(s) / (2.0 * PI * PI * sin_theta.max(1e-7))
@@ -244,7 +249,7 @@ impl EmitterT for Envmap {
 
     /// Radiance seen looking along world direction `d` (the direction of
     /// a ray that escaped the scene).
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
         let local = self.to_local(d);
         self.lookup(store, self.uv_to_grid(Envmap::direction_to_uv(local)))
     }
@@ -296,7 +301,9 @@ mod tests {
             (Vec3::new(0.0, 1.0, 0.0), Vec3::new(2.5, 1.0, 0.0)),
             (Vec3::new(0.0, -1.0, 0.0), Vec3::new(2.5, 3.0, 0.0)),
         ] {
-            let got = e.eval_environment::<f32>(&ctx.store.primal(), d).val();
+            let got = e
+                .eval_environment::<f32>(&ctx.store.primal(), V3::cst(d))
+                .val();
             assert!(
                 (got - want).abs().max_element() < 1e-4,
                 "{d}: {got} vs {want}"
@@ -308,7 +315,7 @@ mod tests {
             Vec2::new(0.8, 0.9),
             Vec2::new(0.45, 0.5),
         ] {
-            let back = Envmap::direction_to_uv(Envmap::uv_to_direction(uv));
+            let back = Envmap::direction_to_uv(V3::<f32>::cst(Envmap::uv_to_direction(uv))).val();
             assert!((back - uv).abs().max_element() < 1e-5, "{uv} -> {back}");
         }
     }
@@ -323,11 +330,11 @@ mod tests {
         let mut t = vec![0.0; 36];
         t[(4 + 1) * 3] = 1.0; // texel (1, 1), red
         let seeds = Seeds::tangents(&ctx.store, &[("env.data", &t)]).unwrap();
-        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), d);
+        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), V3::cst(d));
         assert!((l.x.d - 2.0 * 0.7 * 0.5).abs() < 1e-4, "{l:?}");
         assert_eq!(l.y.d, 0.0);
         let seeds = Seeds::tangents(&ctx.store, &[("env.scale", &[1.0])]).unwrap();
-        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), d);
+        let l = e.eval_environment::<Dual>(&ctx.store.view(&seeds), V3::cst(d));
         assert!((l.x.d - l.x.v / 2.0).abs() < 1e-5, "{l:?}");
     }
 
@@ -364,7 +371,7 @@ mod tests {
                     ds, weight: wgt, ..
                 } = e.sample_direction::<f32>(&s.primal(), &[], V3::cst(ref_p), rng.next_2d())?;
                 let pdf = e.pdf_direction(s, &[], ref_p, ds.d, ds.p, ds.n);
-                let want = e.eval_environment::<f32>(&s.primal(), ds.d).val() / pdf;
+                let want = e.eval_environment::<f32>(&s.primal(), V3::cst(ds.d)).val() / pdf;
                 // f32 round-off in the direction (~1e-6) moves u by
                 // ~1e-6 / sin θ, and radiance changes by at most ~w · 6×
                 // per unit u on this map
@@ -415,7 +422,7 @@ mod tests {
             n_ok += 1;
             let pdf = e.pdf_direction(s, &[], Vec3::ZERO, ds.d, ds.p, ds.n);
             assert!((pdf - ds.pdf).abs() <= 2e-3 * pdf, "{pdf} vs {}", ds.pdf);
-            let l = e.eval_environment::<f32>(&s.primal(), ds.d).val();
+            let l = e.eval_environment::<f32>(&s.primal(), V3::cst(ds.d)).val();
             assert!((w.val() * pdf - l).abs().max_element() <= 2e-3 * l.max_element() + 1e-6);
             assert!((ds.p - Vec3::ONE).length() > 2.0);
         }

@@ -170,7 +170,7 @@ macro_rules! delta_light_queries {
         fn eval_environment<R: $crate::ad::Real>(
             &self,
             _: &$crate::params::ParamView,
-            _: glam::Vec3,
+            _: $crate::math::V3<R>,
         ) -> $crate::math::Spectrum<R> {
             $crate::math::V3::zero()
         }
@@ -252,8 +252,9 @@ pub trait EmitterT {
     /// Radiance leaving a surface emitter at `si` towards `si.wi`.
     fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
     /// Radiance arriving from infinity along ray direction `d` (environment
-    /// emitters; zero for others).
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R>;
+    /// emitters; zero for others), in `R`: the direction follows the camera
+    /// or a specular chain when they move.
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R>;
     /// True for point, spot and directional emitters.
     fn is_delta(&self) -> bool;
     /// True for constant and envmap emitters.
@@ -312,7 +313,7 @@ impl EmitterT for Emitter {
         dispatch!(self, e => e.eval_surface(store, si))
     }
     #[inline]
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: Vec3) -> Spectrum<R> {
+    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
         dispatch!(self, e => e.eval_environment(store, d))
     }
     fn is_delta(&self) -> bool {

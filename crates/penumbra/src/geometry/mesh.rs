@@ -4,7 +4,8 @@
 //! Parameters (Mitsuba's `traverse()` names):
 //! - `<key>.vertex_positions`: `[n, 3]`, world space (`to_world` applied at
 //!   load), flags [`ParamFlags::GEOMETRY`], domain [`Domain::Finite`];
-//! - `<key>.vertex_normals`: `[n, 3]`, world space, unit length, if the
+//! - `<key>.vertex_normals`: `[n, 3]`, world space, unit length, flags
+//!   [`ParamFlags::SHADING_FRAME`] (no edge moves, frames turn), if the
 //!   file has normals or they were computed (not with `face_normals`);
 //! - `<key>.vertex_texcoords`: `[n, 2]`, if the file has uvs;
 //! - `<key>.to_world`: `[4, 4]`, row-major, geometry: the transform the
@@ -233,7 +234,7 @@ impl Mesh {
                 format!("{key}.vertex_normals"),
                 flat3(&n),
                 vec![nv, 3],
-                ParamFlags::DIFFERENTIABLE,
+                ParamFlags::SHADING_FRAME,
                 Domain::Finite,
             )?),
             None => None,

@@ -47,7 +47,7 @@ impl DirectIntegrator {
         let Some(hit) = scene.intersect(&ray) else {
             return match scene.environment {
                 Some(env) if !self.hide_emitters => {
-                    scene.emitters[env as usize].eval_environment(store, ray.d)
+                    scene.emitters[env as usize].eval_environment(store, camera_ray.d)
                 }
                 _ => Spectrum::zero(),
             };
@@ -100,7 +100,7 @@ impl DirectIntegrator {
                 },
                 _ => match scene.environment {
                     Some(env) => {
-                        let le = scene.emitters[env as usize].eval_environment(store, d);
+                        let le = scene.emitters[env as usize].eval_environment(store, b.d);
                         let pdf = if b.delta {
                             0.0
                         } else {

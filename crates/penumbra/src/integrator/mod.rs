@@ -107,6 +107,9 @@ impl Integrator {
 pub(crate) struct Bounce<R> {
     /// The ray traced from `si` (primal).
     pub ray: Ray,
+    /// Its direction in `R`: what an environment emitter is looked up
+    /// along if the ray escapes.
+    pub d: V3<R>,
     pub hit: Option<Hit>,
     /// The next vertex, `wi` set (`None` if the ray escaped).
     pub next: Option<SurfaceInteraction<R>>,
@@ -156,6 +159,7 @@ pub(crate) fn scatter<R: Real>(
         };
         return Bounce {
             ray,
+            d,
             hit,
             next: hit.map(|h| scene.surface_interaction(store, &dray, &h)),
             weight: bs.weight,
@@ -172,8 +176,10 @@ pub(crate) fn scatter<R: Real>(
             let g = next.area_scale * wo.dot(next.n).abs() / dist2;
             (Some(next), wo, g / g.val())
         }
-        // towards the environment (at infinity): the direction is the constant
-        None => (None, d, R::cst(1.0)),
+        // towards the environment (at infinity): the world direction is the
+        // constant, as for an emitter sample of the environment (both MIS
+        // strategies must see it through the same map)
+        None => (None, V3::cst(d.val()), R::cst(1.0)),
     };
     let f = bsdf.eval(store, si, si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
@@ -191,6 +197,7 @@ pub(crate) fn scatter<R: Real>(
     ) * jacobian;
     Bounce {
         ray,
+        d: wo,
         hit,
         next,
         weight,

@@ -55,6 +55,8 @@ impl PathIntegrator {
         // the ray that reached the current vertex (primal), and the state of
         // the vertex it left, for MIS of emitters hit by BSDF sampling
         let mut ray = camera_ray.val();
+        // its direction in R, for environment lookups
+        let mut ray_d = camera_ray.d;
         let mut prev_p = ray.o;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
@@ -66,7 +68,7 @@ impl PathIntegrator {
                 // escaped: environment emission
                 if let Some(env) = scene.environment {
                     if !(self.hide_emitters && depth == 0) {
-                        let le = scene.emitters[env as usize].eval_environment::<R>(store, ray.d);
+                        let le = scene.emitters[env as usize].eval_environment::<R>(store, ray_d);
                         let w = if prev_delta {
                             1.0
                         } else {
@@ -134,6 +136,7 @@ impl PathIntegrator {
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;
+            ray_d = bounce.d;
             prev_p = si.p.val();
             hit = bounce.hit;
             vertex = bounce.next;

@@ -25,6 +25,10 @@ pub struct ParamFlags {
     /// Changing it moves visibility discontinuities (geometry): its
     /// derivatives need boundary terms.
     pub discontinuous: bool,
+    /// Changing it moves surface points or shading frames (positions,
+    /// normals, the camera): paths are then differentiated in a
+    /// parameterisation that moves with it (`integrator::scatter`).
+    pub moves_frames: bool,
     /// Cannot be changed after loading (e.g. mesh topology).
     pub read_only: bool,
 }
@@ -33,21 +37,32 @@ impl ParamFlags {
     pub const DIFFERENTIABLE: ParamFlags = ParamFlags {
         differentiable: true,
         discontinuous: false,
+        moves_frames: false,
         read_only: false,
     };
     pub const GEOMETRY: ParamFlags = ParamFlags {
         differentiable: true,
         discontinuous: true,
+        moves_frames: true,
+        read_only: false,
+    };
+    /// Shading normals: they turn shading frames without moving any edge.
+    pub const SHADING_FRAME: ParamFlags = ParamFlags {
+        differentiable: true,
+        discontinuous: false,
+        moves_frames: true,
         read_only: false,
     };
     pub const NON_DIFFERENTIABLE: ParamFlags = ParamFlags {
         differentiable: false,
         discontinuous: false,
+        moves_frames: false,
         read_only: false,
     };
     pub const READ_ONLY: ParamFlags = ParamFlags {
         differentiable: false,
         discontinuous: false,
+        moves_frames: false,
         read_only: true,
     };
 }
@@ -344,7 +359,7 @@ impl Seeds {
                 });
             }
             seeds.tangents[id.0 as usize] = Some(t.to_vec());
-            seeds.moves_geometry |= p.flags.discontinuous;
+            seeds.moves_geometry |= p.flags.moves_frames;
         }
         Ok(seeds)
     }
@@ -358,7 +373,7 @@ impl Seeds {
             let p = store.get(id);
             require_differentiable(&p.key, p)?;
             seeds.recorded[id.0 as usize] = true;
-            seeds.moves_geometry |= p.flags.discontinuous;
+            seeds.moves_geometry |= p.flags.moves_frames;
         }
         Ok(seeds)
     }
@@ -368,9 +383,10 @@ impl Seeds {
         self.recorded.get(id.0 as usize).copied().unwrap_or(false)
     }
 
-    /// Whether a seeded parameter moves geometry or the camera (flag
-    /// `discontinuous`): paths are then re-evaluated in the
-    /// parameterisation of `integrator::scatter`.
+    /// Whether a seeded parameter moves surface points or shading frames
+    /// (flag `moves_frames`: geometry, shading normals, the camera): paths
+    /// are then re-evaluated in the parameterisation of
+    /// `integrator::scatter`.
     pub fn moves_geometry(&self) -> bool {
         self.moves_geometry
     }
