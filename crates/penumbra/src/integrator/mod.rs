@@ -12,7 +12,7 @@ pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
-use crate::bsdf::{Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::Spectrum;
@@ -115,7 +115,8 @@ pub(crate) struct Bounce<R> {
     pub delta: bool,
 }
 
-/// Traces the ray of BSDF sample `bs` from `si` and re-evaluates what it
+/// Traces the ray of BSDF sample `bs` from `si` (where the BSDF is
+/// `bsdf`) and re-evaluates what it
 /// reaches in `R`, in a parameterisation of the path that does not move
 /// with the parameters (the interior term of the derivative; Zhang et al.
 /// 2020, "Path-Space Differentiable Rendering"; on which choices are valid:
@@ -137,7 +138,7 @@ pub(crate) struct Bounce<R> {
 /// point where the ray hits, which is what this returns then.
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
-    bsdf: &Bsdf,
+    bsdf: &BsdfContext<R>,
     si: &SurfaceInteraction<R>,
     bs: &BsdfSample<R>,
     geometry_moves: bool,
@@ -174,7 +175,7 @@ pub(crate) fn scatter<R: Real>(
         // towards the environment (at infinity): the direction is the constant
         None => (None, d, R::cst(1.0)),
     };
-    let f = bsdf.eval(&scene.params, si, si.to_local(wo));
+    let f = bsdf.eval(si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
     let attach = |w: R, f: R| {
         if f.val() != 0.0 {
