@@ -222,3 +222,90 @@ pub(crate) fn max_depth(node: &Node) -> Result<u32> {
     }
     Ok(if d == -1 { u32::MAX } else { d as u32 })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ad::Dual;
+    use crate::texture::CHECKERBOARD_EVALS;
+    use glam::Vec2;
+    use std::path::Path;
+
+    /// A camera looking at a large two-sided plane whose BSDF has two
+    /// textures: a checkerboard blend weight of a roughconductor with a
+    /// checkerboard roughness and a diffuse; lit by the environment.
+    const SCENE: &str = r#"<scene version="3.0.0">
+        INTEGRATOR
+        <sensor type="perspective">
+            <float name="fov" value="30"/>
+            <transform name="to_world">
+                <lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/>
+            </transform>
+            <film type="hdrfilm">
+                <integer name="width" value="4"/>
+                <integer name="height" value="4"/>
+            </film>
+        </sensor>
+        <shape type="rectangle">
+            <transform name="to_world"><scale value="10"/></transform>
+            <bsdf type="twosided">
+                <bsdf type="blendbsdf">
+                    <texture type="checkerboard" name="weight"/>
+                    <bsdf type="roughconductor">
+                        <texture type="checkerboard" name="alpha"/>
+                    </bsdf>
+                    <bsdf type="diffuse"/>
+                </bsdf>
+            </bsdf>
+        </shape>
+        <emitter type="constant"/>
+    </scene>"#;
+
+    /// The integrators read each texture of a vertex's BSDF once, however
+    /// often they sample, evaluate and re-evaluate the BSDF there: with one
+    /// scattering vertex per path (every camera ray hits the plane), the
+    /// checkerboards are evaluated twice per path, in the primal and along
+    /// moving geometry (where `scatter` re-evaluates the BSDF).
+    #[test]
+    fn bsdf_textures_are_read_once_per_vertex() {
+        let integrators = [
+            r#"<integrator type="path"><integer name="max_depth" value="2"/></integrator>"#,
+            r#"<integrator type="direct">
+                <integer name="emitter_samples" value="3"/>
+                <integer name="bsdf_samples" value="3"/>
+            </integrator>"#,
+        ];
+        for integrator in integrators {
+            let xml = SCENE.replace("INTEGRATOR", integrator);
+            let scene = Scene::load_str(&xml, Path::new("test.xml"), &[]).unwrap();
+            let sensor = &scene.sensors[0];
+            let paths = 64;
+            for geometry_moves in [false, true] {
+                let before = CHECKERBOARD_EVALS.with(|n| n.get());
+                for k in 0..paths {
+                    let cs = CameraSample {
+                        sensor,
+                        film: Vec2::new((k % 8) as f32 + 0.5, (k / 8) as f32 + 0.5) / 8.0,
+                        lens: Vec2::ZERO,
+                    };
+                    let mut rng = sensor.sampler.stream(1, k, 0, 1);
+                    if geometry_moves {
+                        scene
+                            .integrator
+                            .radiance::<Dual>(&scene, &cs, &mut rng, true);
+                    } else {
+                        scene
+                            .integrator
+                            .radiance::<f32>(&scene, &cs, &mut rng, false);
+                    }
+                }
+                let evals = CHECKERBOARD_EVALS.with(|n| n.get()) - before;
+                assert_eq!(
+                    evals,
+                    2 * paths as usize,
+                    "{integrator}, geometry moves: {geometry_moves}"
+                );
+            }
+        }
+    }
+}
