@@ -198,6 +198,21 @@ pub struct BsdfContext<'a, R: Real> {
 }
 
 impl<'a, R: Real> BsdfContext<'a, R> {
+    /// Storage for [`set`](Self::set): a context of no BSDF yet (using it
+    /// panics).
+    pub fn empty() -> Self {
+        BsdfContext {
+            nodes: [None; MAX_CONTEXT_NODES],
+        }
+    }
+
+    /// Makes this the context of `bsdf` at the vertex `si`, in place: a
+    /// loop over vertices that keeps one context copies none (a returned
+    /// context is moved, a few hundred bytes, per vertex).
+    pub fn set(&mut self, bsdf: &'a Bsdf, store: &ParamStore, si: &SurfaceInteraction<R>) {
+        bsdf.write_context(store, si, &mut self.nodes);
+    }
+
     fn root(&self) -> NestedContext<'_, 'a, R> {
         NestedContext { nodes: &self.nodes }
     }
@@ -401,9 +416,9 @@ impl Bsdf {
         store: &ParamStore,
         si: &SurfaceInteraction<R>,
     ) -> BsdfContext<'a, R> {
-        let mut nodes = [None; MAX_CONTEXT_NODES];
-        self.write_context(store, si, &mut nodes);
-        BsdfContext { nodes }
+        let mut context = BsdfContext::empty();
+        context.set(self, store, si);
+        context
     }
 
     /// Recomputes what a BSDF derives from its parameters (sampling

@@ -4,7 +4,7 @@
 
 use super::{mis_weight, scatter};
 use crate::ad::Real;
-use crate::bsdf::{BsdfContextT, BsdfFlags, BsdfT};
+use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
@@ -61,6 +61,9 @@ impl PathIntegrator {
         let mut hit = scene.intersect(&ray);
         let mut vertex = hit.map(|h| scene.surface_interaction::<R>(&camera_ray, &h));
         let mut depth = 0u32;
+        // the BSDF at the current vertex, its textures read once for all
+        // its uses there; set in place at each vertex
+        let mut bsdf_ctx = BsdfContext::empty();
         loop {
             let (Some(h), Some(si)) = (hit, vertex) else {
                 // escaped: environment emission
@@ -106,8 +109,7 @@ impl PathIntegrator {
                 return result;
             }
             let bsdf = scene.shape_bsdf(h.shape);
-            // its textures read once for everything below
-            let bsdf_ctx = bsdf.context(store, &si);
+            bsdf_ctx.set(bsdf, store, &si);
 
             // next-event estimation
             let u_light = rng.next_2d();
