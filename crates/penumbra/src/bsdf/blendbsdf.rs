@@ -1,7 +1,8 @@
 //! `blendbsdf`: a linear blend of two BSDFs, `(1 − w) f0 + w f1`.
 
 use super::{
-    chosen_with, nested_bsdfs, reuse_uniform, smooth_sample, Bsdf, BsdfFlags, BsdfSample, BsdfT,
+    chosen_with, nested_bsdfs, reuse_uniform, smooth_sample, Bsdf, BsdfContextT, BsdfFlags,
+    BsdfSample, BsdfT, NestedContext, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -61,36 +62,69 @@ impl BsdfT for BlendBsdf {
         self.bsdfs[0].flags().union(self.bsdfs[1].flags())
     }
 
-    fn eval<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        let w = self.w(store, si);
-        self.bsdfs[0].eval(store, si, wo) * (-w + 1.0) + self.bsdfs[1].eval(store, si, wo) * w
+    fn context_len(&self) -> usize {
+        1 + self.bsdfs[0].context_len() + self.bsdfs[1].context_len()
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let w = self.w(store, si).val();
+    fn write_context<'a, R: Real>(
+        &'a self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        let weight = self.w(store, si);
+        let n0 = self.bsdfs[0].write_context(store, si, &mut nodes[1..]);
+        let n1 = self.bsdfs[1].write_context(store, si, &mut nodes[1 + n0..]);
+        nodes[0] = Some(NodeContext::BlendBsdf(BlendBsdfContext {
+            weight,
+            second: 1 + n0,
+        }));
+        1 + n0 + n1
+    }
+}
+
+/// [`BlendBsdf`] at a vertex: the weight, followed in the [`BsdfContext`]
+/// by the contexts of the two nested BSDFs.
+///
+/// [`BsdfContext`]: super::BsdfContext
+#[derive(Clone, Copy, Debug)]
+pub struct BlendBsdfContext<R: Real> {
+    weight: R,
+    /// Where the second nested BSDF's context is, relative to this one's.
+    second: usize,
+}
+
+impl<R: Real> BlendBsdfContext<R> {
+    fn nested<'c, 'a>(&self, this: NestedContext<'c, 'a, R>) -> [NestedContext<'c, 'a, R>; 2] {
+        [this.at(1), this.at(self.second)]
+    }
+
+    pub(crate) fn eval(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
+        let w = self.weight;
+        let [b0, b1] = self.nested(this);
+        b0.eval(wo) * (-w + 1.0) + b1.eval(wo) * w
+    }
+
+    pub(crate) fn pdf(&self, this: NestedContext<'_, '_, R>, wo: Vec3) -> f32 {
+        let w = self.weight.val();
+        let [b0, b1] = self.nested(this);
         let mut p = 0.0;
         if w < 1.0 {
-            p += (1.0 - w) * self.bsdfs[0].pdf(store, si, wo);
+            p += (1.0 - w) * b0.pdf(wo);
         }
         if w > 0.0 {
-            p += w * self.bsdfs[1].pdf(store, si, wo);
+            p += w * b1.pdf(wo);
         }
         p
     }
 
-    fn sample<R: Real>(
+    pub(crate) fn sample(
         &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
+        this: NestedContext<'_, '_, R>,
         u1: f32,
         u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        let w_r = self.w(store, si);
+        let w_r = self.weight;
         let w = w_r.val();
         let (idx, start, prob, prob_r) = if u1 >= w {
             (0, w, 1.0 - w, -w_r + 1.0)
@@ -100,24 +134,25 @@ impl BsdfT for BlendBsdf {
         if !(prob > 0.0) {
             return None;
         }
-        let bs = self.bsdfs[idx].sample(store, si, reuse_uniform(u1, start, prob), u2)?;
+        let bs = self.nested(this)[idx].sample(reuse_uniform(u1, start, prob), u2)?;
         if bs.lobe.has(BsdfFlags::DELTA) {
             Some(chosen_with(bs, prob, prob_r))
         } else {
-            smooth_sample(self, store, si, bs.wo.val(), bs.eta, bs.lobe)
+            smooth_sample(&this, bs.wo.val(), bs.eta, bs.lobe)
         }
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        let w = self.w(store, si);
-        self.bsdfs[0].albedo(store, si) * (-w + 1.0) + self.bsdfs[1].albedo(store, si) * w
+    pub(crate) fn albedo(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        let w = self.weight;
+        let [b0, b1] = self.nested(this);
+        b0.albedo() * (-w + 1.0) + b1.albedo() * w
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{Bsdf, BsdfFlags, BsdfT};
+    use super::super::{Bsdf, BsdfContextT, BsdfFlags};
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::params::Seeds;
@@ -151,15 +186,23 @@ mod tests {
         let wi = dir(0.7, 0.0);
         let wo = dir(0.6, 3.0);
         let s = si::<f32>(wi);
-        let want = bb.bsdfs[0].eval(&store.primal(), &s, V3::cst(wo)).val() * 0.7
-            + bb.bsdfs[1].eval(&store.primal(), &s, V3::cst(wo)).val() * 0.3;
+        let want = bb.bsdfs[0]
+            .context(&store.primal(), &s)
+            .eval(V3::cst(wo))
+            .val()
+            * 0.7
+            + bb.bsdfs[1]
+                .context(&store.primal(), &s)
+                .eval(V3::cst(wo))
+                .val()
+                * 0.3;
         assert!((eval_f32(&b, &store, wi, wo) - want).abs().max_element() < 1e-6);
         check_smooth(&b, &store, &[wi, dir(0.2, 1.0)], 1);
         let seeds = Seeds::tangents(&store, &[("bl.weight.value", &[1.0])]).unwrap();
         let store = store.view(&seeds);
-        let d = b.eval(&store, &si::<Dual>(wi), V3::cst(wo));
-        let diff = bb.bsdfs[1].eval(&store, &s, V3::cst(wo)).val()
-            - bb.bsdfs[0].eval(&store, &s, V3::cst(wo)).val();
+        let d = b.context(&store, &si::<Dual>(wi)).eval(V3::cst(wo));
+        let diff = bb.bsdfs[1].context(&store, &s).eval(V3::cst(wo)).val()
+            - bb.bsdfs[0].context(&store, &s).eval(V3::cst(wo)).val();
         assert!((d.x.d - diff.x).abs() < 1e-5);
 
         // blend with a delta lobe: its samples carry the component weight
@@ -175,12 +218,8 @@ mod tests {
         let mut ctx = LoadContext::default();
         let b = Bsdf::from_node(&n, &mut ctx).unwrap();
         let bs = b
-            .sample(
-                &ctx.store.primal(),
-                &si::<f32>(wi),
-                0.1,
-                glam::Vec2::splat(0.5),
-            )
+            .context(&ctx.store.primal(), &si::<f32>(wi))
+            .sample(0.1, glam::Vec2::splat(0.5))
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         assert!((bs.pdf - 0.5).abs() < 1e-6 && (bs.weight.x - 1.0).abs() < 1e-6);

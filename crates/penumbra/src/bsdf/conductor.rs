@@ -2,7 +2,7 @@
 //! conductor Fresnel term).
 
 use super::fresnel::{fresnel_conductor, lookup_conductor, CONDUCTOR_TABLE};
-use super::{default_albedo, BsdfFlags, BsdfSample, BsdfT};
+use super::{default_albedo, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -69,14 +69,30 @@ impl ConductorIor {
         Ok(ConductorIor { eta, k })
     }
 
-    /// Fresnel reflectance for incident cosine `cos_i` at `si`.
-    pub fn fresnel<R: Real>(
+    /// The index at `si`.
+    pub fn eval<R: Real>(
         &self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        cos_i: R,
-    ) -> Spectrum<R> {
-        fresnel_conductor(cos_i, self.eta.eval(store, si), self.k.eval(store, si))
+    ) -> ConductorIorValue<R> {
+        ConductorIorValue {
+            eta: self.eta.eval(store, si),
+            k: self.k.eval(store, si),
+        }
+    }
+}
+
+/// A [`ConductorIor`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct ConductorIorValue<R: Real> {
+    eta: Spectrum<R>,
+    k: Spectrum<R>,
+}
+
+impl<R: Real> ConductorIorValue<R> {
+    /// Fresnel reflectance for incident cosine `cos_i`.
+    pub fn fresnel(&self, cos_i: R) -> Spectrum<R> {
+        fresnel_conductor(cos_i, self.eta, self.k)
     }
 }
 
@@ -111,35 +127,53 @@ impl BsdfT for Conductor {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DELTA_REFLECTION
     }
-    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
-        0.0
-    }
-    fn sample<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        _u1: f32,
-        _u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        if !(si.wi.z.val() > 0.0) {
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Conductor(ConductorContext {
+            wi: si.wi,
+            ior: self.ior.eval(store, si),
+            specular_reflectance: self.specular_reflectance.eval(store, si),
+        }));
+        1
+    }
+}
+
+/// [`Conductor`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct ConductorContext<R: Real> {
+    wi: V3<R>,
+    ior: ConductorIorValue<R>,
+    specular_reflectance: Spectrum<R>,
+}
+
+impl<R: Real> BsdfContextT<R> for ConductorContext<R> {
+    fn eval(&self, _: V3<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf(&self, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample(&self, _u1: f32, _u2: Vec2) -> Option<BsdfSample<R>> {
+        if !(self.wi.z.val() > 0.0) {
             return None;
         }
-        let f = self.ior.fresnel(store, si, si.wi.z);
-        let weight = f.mul_elem(self.specular_reflectance.eval(store, si));
-        Some(BsdfSample::specular_reflection(si.wi, 1.0, weight))
+        let f = self.ior.fresnel(self.wi.z);
+        let weight = f.mul_elem(self.specular_reflectance);
+        Some(BsdfSample::specular_reflection(self.wi, 1.0, weight))
     }
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        default_albedo(self, store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        default_albedo(self)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::BsdfT;
+    use super::super::BsdfContextT;
     use crate::bsdf::fresnel::fresnel_conductor_1;
 
     #[test]
@@ -151,18 +185,15 @@ mod tests {
         }
         let wi = dir(0.3, 1.0);
         let bs = b
-            .sample(&store.primal(), &si::<f32>(wi), 0.5, glam::Vec2::splat(0.5))
+            .context(&store.primal(), &si::<f32>(wi))
+            .sample(0.5, glam::Vec2::splat(0.5))
             .unwrap();
         assert!((bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
         assert!((bs.weight.val() - glam::Vec3::ONE).abs().max_element() < 1e-6);
         assert!(eval_f32(&b, &store, wi, bs.wo.val()) == glam::Vec3::ZERO);
         assert!(b
-            .sample(
-                &store.primal(),
-                &si::<f32>(-wi),
-                0.5,
-                glam::Vec2::splat(0.5)
-            )
+            .context(&store.primal(), &si::<f32>(-wi))
+            .sample(0.5, glam::Vec2::splat(0.5))
             .is_none());
 
         let (b, store) = build(
@@ -174,7 +205,8 @@ mod tests {
         );
         check_direction_derivatives(&b, &store, 3);
         let bs = b
-            .sample(&store.primal(), &si::<f32>(wi), 0.1, glam::Vec2::ZERO)
+            .context(&store.primal(), &si::<f32>(wi))
+            .sample(0.1, glam::Vec2::ZERO)
             .unwrap();
         let want = 0.5 * fresnel_conductor_1(wi.z, 0.143036, 3.983);
         assert!((bs.weight.x - want).abs() < 1e-5, "{bs:?} {want}");

@@ -3,8 +3,8 @@
 
 use super::fresnel::{fresnel_dielectric, refract};
 use super::{
-    default_albedo, eta_props, sample_reflect_or_transmit, scalar_param, specular_factors,
-    BsdfFlags, BsdfSample, BsdfT,
+    default_albedo, eta_props, eval_factor, sample_reflect_or_transmit, scalar_param,
+    specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -49,46 +49,65 @@ impl BsdfT for Dielectric {
             .union(BsdfFlags::DELTA_TRANSMISSION)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
-        0.0
-    }
-    fn sample<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        u1: f32,
-        _u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        if si.wi.z.val() == 0.0 {
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Dielectric(DielectricContext {
+            wi: si.wi,
+            eta: store.read::<R>(self.eta, 0),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+            specular_transmittance: eval_factor(&self.specular_transmittance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`Dielectric`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct DielectricContext<R: Real> {
+    wi: V3<R>,
+    eta: R,
+    specular_reflectance: Option<Spectrum<R>>,
+    specular_transmittance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for DielectricContext<R> {
+    fn eval(&self, _: V3<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf(&self, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample(&self, u1: f32, _u2: Vec2) -> Option<BsdfSample<R>> {
+        let wi = self.wi;
+        if wi.z.val() == 0.0 {
             return None;
         }
-        let eta = store.read::<R>(self.eta, 0);
-        let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(si.wi.z, eta);
-        let wo = refract(si.wi, V3::cst(Vec3::Z), cos_t, eta_ti);
+        let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.z, self.eta);
+        let wo = refract(wi, V3::cst(Vec3::Z), cos_t, eta_ti);
         // radiance is scaled by η_ti² crossing the interface
         let value = (-f + 1.0) * eta_ti * eta_ti;
         sample_reflect_or_transmit(
-            store,
-            si,
+            wi,
             f,
-            &self.specular_reflectance,
-            &self.specular_transmittance,
+            self.specular_reflectance,
+            self.specular_transmittance,
             u1,
             (wo, value, eta_it.val(), BsdfFlags::DELTA_TRANSMISSION),
         )
     }
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        default_albedo(self, store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        default_albedo(self)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{BsdfFlags, BsdfT};
+    use super::super::{BsdfContextT, BsdfFlags};
     use crate::bsdf::fresnel::fresnel_dielectric;
     use crate::testing::Pcg32;
     use glam::{Vec2, Vec3};
@@ -115,7 +134,8 @@ mod tests {
             let (mut nr, n) = (0, 4000);
             for _ in 0..n {
                 let bs = b
-                    .sample(&store.primal(), &s, rng.next_f32(), Vec2::ZERO)
+                    .context(&store.primal(), &s)
+                    .sample(rng.next_f32(), Vec2::ZERO)
                     .unwrap();
                 if bs.lobe == BsdfFlags::DELTA_REFLECTION {
                     nr += 1;
@@ -146,12 +166,8 @@ mod tests {
         }
         // total internal reflection from inside at grazing angles
         let bs = b
-            .sample(
-                &store.primal(),
-                &si::<f32>(dir(-0.2, 0.0)),
-                0.999,
-                Vec2::ZERO,
-            )
+            .context(&store.primal(), &si::<f32>(dir(-0.2, 0.0)))
+            .sample(0.999, Vec2::ZERO)
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
     }
@@ -169,7 +185,8 @@ mod tests {
         assert!(store.id("b.specular_transmittance.value").is_some());
         assert!(store.id("b.specular_reflectance.value").is_none());
         let bs = b
-            .sample(&store.primal(), &si::<f32>(Vec3::Z), 0.99, Vec2::ZERO)
+            .context(&store.primal(), &si::<f32>(Vec3::Z))
+            .sample(0.99, Vec2::ZERO)
             .unwrap();
         assert!(
             (bs.weight.x - 0.5 / (1.5f32 / 1.000277).powi(2)).abs() < 1e-5,

@@ -1,6 +1,6 @@
 //! `diffuse`: the ideal Lambertian reflector.
 
-use super::{BsdfFlags, BsdfSample, BsdfT};
+use super::{BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -38,33 +38,44 @@ impl BsdfT for Diffuse {
         BsdfFlags::DIFFUSE_REFLECTION
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        if !(si.wi.z.val() > 0.0 && wo.z.val() > 0.0) {
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Diffuse(DiffuseContext {
+            wi: si.wi,
+            reflectance: self.reflectance.eval(store, si),
+        }));
+        1
+    }
+}
+
+/// [`Diffuse`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct DiffuseContext<R: Real> {
+    wi: V3<R>,
+    reflectance: Spectrum<R>,
+}
+
+impl<R: Real> BsdfContextT<R> for DiffuseContext<R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        if !(self.wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
-        self.reflectance.eval(store, si) * (wo.z * FRAC_1_PI)
+        self.reflectance * (wo.z * FRAC_1_PI)
     }
 
-    fn pdf<R: Real>(&self, _store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        if !(si.wi.z.val() > 0.0) {
+    fn pdf(&self, wo: Vec3) -> f32 {
+        if !(self.wi.z.val() > 0.0) {
             return 0.0;
         }
         warp::square_to_cosine_hemisphere_pdf(wo)
     }
 
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        _u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        if !(si.wi.z.val() > 0.0) {
+    fn sample(&self, _u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        if !(self.wi.z.val() > 0.0) {
             return None;
         }
         let wo = warp::square_to_cosine_hemisphere(u2);
@@ -76,14 +87,14 @@ impl BsdfT for Diffuse {
             wo: V3::cst(wo),
             pdf,
             // f cos / pdf = reflectance exactly (cos/π cancels)
-            weight: self.reflectance.eval(store, si),
+            weight: self.reflectance,
             eta: 1.0,
             lobe: BsdfFlags::DIFFUSE_REFLECTION,
         })
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        self.reflectance.eval(store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        self.reflectance
     }
 }
 

@@ -1,7 +1,10 @@
 //! `mask`: opacity masks (leaves, fences): a blend of a nested BSDF and a
 //! null pass-through.
 
-use super::{chosen_with, nested_bsdfs, reuse_uniform, Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    chosen_with, nested_bsdfs, reuse_uniform, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT,
+    NestedContext, NodeContext,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -52,48 +55,69 @@ impl BsdfT for Mask {
             .union(BsdfFlags::TWO_SIDED)
     }
 
-    fn eval<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        self.nested.eval(store, si, wo) * self.o(store, si)
+    fn context_len(&self) -> usize {
+        1 + self.nested.context_len()
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        self.o(store, si).val() * self.nested.pdf(store, si, wo)
-    }
-
-    fn sample<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Mask(MaskContext {
+            wi: si.wi,
+            opacity: self.o(store, si),
+        }));
+        1 + self.nested.write_context(store, si, &mut nodes[1..])
+    }
+}
+
+/// [`Mask`] at a vertex: the opacity, followed in the [`BsdfContext`] by
+/// the nested BSDF's context.
+///
+/// [`BsdfContext`]: super::BsdfContext
+#[derive(Clone, Copy, Debug)]
+pub struct MaskContext<R: Real> {
+    wi: V3<R>,
+    opacity: R,
+}
+
+impl<R: Real> MaskContext<R> {
+    pub(crate) fn eval(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
+        this.at(1).eval(wo) * self.opacity
+    }
+
+    pub(crate) fn pdf(&self, this: NestedContext<'_, '_, R>, wo: Vec3) -> f32 {
+        self.opacity.val() * this.at(1).pdf(wo)
+    }
+
+    pub(crate) fn sample(
+        &self,
+        this: NestedContext<'_, '_, R>,
         u1: f32,
         u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        let o_r = self.o(store, si);
+        let o_r = self.opacity;
         let o = o_r.val();
         if u1 >= o {
             let p = 1.0 - o;
             let weight = V3::splat((-o_r + 1.0) / p);
-            return Some(BsdfSample::pass_through(si.wi, p, weight));
+            return Some(BsdfSample::pass_through(self.wi, p, weight));
         }
-        let bs = self
-            .nested
-            .sample(store, si, reuse_uniform(u1, 0.0, o), u2)?;
+        let bs = this.at(1).sample(reuse_uniform(u1, 0.0, o), u2)?;
         Some(chosen_with(bs, o, o_r))
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        self.nested.albedo(store, si) * self.o(store, si)
+    pub(crate) fn albedo(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        this.at(1).albedo() * self.opacity
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{Bsdf, BsdfFlags, BsdfT};
+    use super::super::{Bsdf, BsdfContextT, BsdfFlags};
     use crate::scene::LoadContext;
 
     #[test]
@@ -115,7 +139,8 @@ mod tests {
         );
         let wi = dir(0.6, 1.0);
         let bs = b
-            .sample(&store.primal(), &si::<f32>(wi), 0.9, glam::Vec2::splat(0.5))
+            .context(&store.primal(), &si::<f32>(wi))
+            .sample(0.9, glam::Vec2::splat(0.5))
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::NULL);
         assert!(

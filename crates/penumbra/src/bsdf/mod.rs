@@ -26,23 +26,23 @@ mod test_util;
 mod thindielectric;
 mod twosided;
 
-pub use blendbsdf::BlendBsdf;
-pub use conductor::Conductor;
-pub use dielectric::Dielectric;
-pub use diffuse::Diffuse;
-pub use mask::Mask;
-pub use null::Null;
-pub use plastic::Plastic;
-pub use roughconductor::RoughConductor;
-pub use roughdielectric::RoughDielectric;
-pub use roughplastic::RoughPlastic;
-pub use thindielectric::ThinDielectric;
-pub use twosided::TwoSided;
+pub use blendbsdf::{BlendBsdf, BlendBsdfContext};
+pub use conductor::{Conductor, ConductorContext};
+pub use dielectric::{Dielectric, DielectricContext};
+pub use diffuse::{Diffuse, DiffuseContext};
+pub use mask::{Mask, MaskContext};
+pub use null::{Null, NullContext};
+pub use plastic::{Plastic, PlasticContext};
+pub use roughconductor::{RoughConductor, RoughConductorContext};
+pub use roughdielectric::{RoughDielectric, RoughDielectricContext};
+pub use roughplastic::{RoughPlastic, RoughPlasticContext};
+pub use thindielectric::{ThinDielectric, ThinDielectricContext};
+pub use twosided::{TwoSided, TwoSidedContext};
 
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::{Frame, Spectrum, V2, V3};
+use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{Class, LoadContext, Node, Prop, Value};
 use crate::texture::{Channels, Texture, TextureT};
@@ -124,29 +124,176 @@ impl<R: Real> BsdfSample<R> {
 
 /// What every BSDF plugin provides.
 pub trait BsdfT {
-    /// The lobes this BSDF has (may depend on textures, so it takes the
-    /// store).
+    /// The lobes this BSDF has.
     fn flags(&self) -> BsdfFlags;
-    /// `f(wi, wo) · |cos θo|` for the smooth lobes (zero for delta lobes),
-    /// differentiable in `si.wi` and `wo` (local frame).
-    fn eval<R: Real>(
-        &self,
+    /// The most nodes its context takes in a [`BsdfContext`]: one, plus
+    /// those of the nested BSDFs a wrapper uses at one vertex.
+    fn context_len(&self) -> usize {
+        1
+    }
+    /// Evaluates every texture and parameter of the BSDF at `si`, in `R`,
+    /// and writes its context to `nodes[0]`; a wrapper writes those of the
+    /// nested BSDFs it uses at `si` after its own (pre-order). Returns how
+    /// many nodes it wrote.
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R>;
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize;
+}
+
+/// A BSDF at one surface vertex, its textures already evaluated there.
+/// Conventions as in the module documentation: `wi` is the vertex's
+/// incident direction; `eval` is `f(wi, wo) · |cos θo|` for the smooth
+/// lobes (zero for delta lobes), differentiable in `wi` and `wo`.
+pub trait BsdfContextT<R: Real> {
+    /// `f(wi, wo) · |cos θo|` for the smooth lobes.
+    fn eval(&self, wo: V3<R>) -> Spectrum<R>;
     /// Solid-angle density with which `sample` returns `wo` (smooth lobes).
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32;
+    fn pdf(&self, wo: Vec3) -> f32;
     /// Samples an outgoing direction; `u1` picks a lobe, `u2` the direction.
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>>;
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>>;
     /// The surface's albedo-like colour (for the AOV integrator).
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn albedo(&self) -> Spectrum<R>;
+}
+
+/// The context of one BSDF node at a vertex (mirrors [`Bsdf`]): its
+/// texture values in `R` and what else its methods read.
+#[derive(Clone, Copy, Debug)]
+pub enum NodeContext<'a, R: Real> {
+    Diffuse(DiffuseContext<R>),
+    Conductor(ConductorContext<R>),
+    RoughConductor(RoughConductorContext<R>),
+    Dielectric(DielectricContext<R>),
+    ThinDielectric(ThinDielectricContext<R>),
+    RoughDielectric(RoughDielectricContext<R>),
+    Plastic(PlasticContext<'a, R>),
+    RoughPlastic(RoughPlasticContext<'a, R>),
+    TwoSided(TwoSidedContext),
+    Null(NullContext<R>),
+    BlendBsdf(BlendBsdfContext<R>),
+    Mask(MaskContext<R>),
+}
+
+/// The most nodes a [`BsdfContext`] holds. The contexts of nested BSDFs
+/// live in one fixed array beside their wrapper's, not boxed inside it (a
+/// recursive enum would need a box per wrapper and vertex): building a
+/// context allocates nothing, and a plain BSDF costs one node and empty
+/// slots. Eight holds three levels of blends (seven nodes) or a mask of a
+/// twosided blend of a BSDF and a blend (seven); [`Bsdf::from_node`]
+/// refuses BSDFs that need more.
+pub const MAX_CONTEXT_NODES: usize = 8;
+
+/// A BSDF at one surface vertex ([`Bsdf::context`]): every texture of the
+/// BSDF and of the nested BSDFs it uses there evaluated once, in `R` (so
+/// derivatives reach the texture parameters), shared by sampling, the MIS
+/// densities, the evaluation for emitter samples and the re-evaluation
+/// along a scattered path.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfContext<'a, R: Real> {
+    /// The nodes in pre-order (a wrapper, then its nested BSDFs' nodes),
+    /// `None` past the last.
+    nodes: [Option<NodeContext<'a, R>>; MAX_CONTEXT_NODES],
+}
+
+impl<'a, R: Real> BsdfContext<'a, R> {
+    /// Storage for [`set`](Self::set): a context of no BSDF yet (using it
+    /// panics).
+    pub fn empty() -> Self {
+        BsdfContext {
+            nodes: [None; MAX_CONTEXT_NODES],
+        }
+    }
+
+    /// Makes this the context of `bsdf` at the vertex `si`, in place: a
+    /// loop over vertices that keeps one context copies none (a returned
+    /// context is moved, a few hundred bytes, per vertex).
+    pub fn set(&mut self, bsdf: &'a Bsdf, store: &ParamView, si: &SurfaceInteraction<R>) {
+        bsdf.write_context(store, si, &mut self.nodes);
+    }
+
+    fn root(&self) -> NestedContext<'_, 'a, R> {
+        NestedContext { nodes: &self.nodes }
+    }
+}
+
+impl<R: Real> BsdfContextT<R> for BsdfContext<'_, R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        self.root().eval(wo)
+    }
+    fn pdf(&self, wo: Vec3) -> f32 {
+        self.root().pdf(wo)
+    }
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        self.root().sample(u1, u2)
+    }
+    fn albedo(&self) -> Spectrum<R> {
+        self.root().albedo()
+    }
+}
+
+/// One node of a [`BsdfContext`] and the nodes after it, which begin with
+/// those of its nested BSDFs: how a wrapper reaches its nested contexts.
+#[derive(Clone, Copy, Debug)]
+pub struct NestedContext<'c, 'a, R: Real> {
+    nodes: &'c [Option<NodeContext<'a, R>>],
+}
+
+impl<'c, 'a, R: Real> NestedContext<'c, 'a, R> {
+    /// The node `offset` places after this one (a wrapper's first nested
+    /// BSDF is at 1).
+    pub(crate) fn at(self, offset: usize) -> Self {
+        NestedContext {
+            nodes: &self.nodes[offset..],
+        }
+    }
+
+    fn node(&self) -> &'c NodeContext<'a, R> {
+        self.nodes[0]
+            .as_ref()
+            .expect("a wrapper writes the nodes of its nested BSDFs")
+    }
+}
+
+/// Calls `method` on the node's context: leaves take the arguments,
+/// wrappers also the view of their node (to reach their nested BSDFs).
+macro_rules! dispatch_context {
+    ($this:expr, $method:ident($($arg:expr),*)) => {
+        match $this.node() {
+            NodeContext::Diffuse(c) => c.$method($($arg),*),
+            NodeContext::Conductor(c) => c.$method($($arg),*),
+            NodeContext::RoughConductor(c) => c.$method($($arg),*),
+            NodeContext::Dielectric(c) => c.$method($($arg),*),
+            NodeContext::ThinDielectric(c) => c.$method($($arg),*),
+            NodeContext::RoughDielectric(c) => c.$method($($arg),*),
+            NodeContext::Plastic(c) => c.$method($($arg),*),
+            NodeContext::RoughPlastic(c) => c.$method($($arg),*),
+            NodeContext::Null(c) => c.$method($($arg),*),
+            NodeContext::TwoSided(c) => c.$method($this, $($arg),*),
+            NodeContext::BlendBsdf(c) => c.$method($this, $($arg),*),
+            NodeContext::Mask(c) => c.$method($this, $($arg),*),
+        }
+    };
+}
+
+impl<R: Real> BsdfContextT<R> for NestedContext<'_, '_, R> {
+    #[inline]
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        dispatch_context!(*self, eval(wo))
+    }
+    #[inline]
+    fn pdf(&self, wo: Vec3) -> f32 {
+        dispatch_context!(*self, pdf(wo))
+    }
+    #[inline]
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        dispatch_context!(*self, sample(u1, u2))
+    }
+    #[inline]
+    fn albedo(&self) -> Spectrum<R> {
+        dispatch_context!(*self, albedo())
+    }
 }
 
 /// All BSDF plugins.
@@ -206,32 +353,17 @@ impl BsdfT for Bsdf {
     fn flags(&self) -> BsdfFlags {
         dispatch!(self, b => b.flags())
     }
+    fn context_len(&self) -> usize {
+        dispatch!(self, b => b.context_len())
+    }
     #[inline]
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        dispatch!(self, b => b.eval(store, si, wo))
-    }
-    #[inline]
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        dispatch!(self, b => b.pdf(store, si, wo))
-    }
-    #[inline]
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        dispatch!(self, b => b.sample(store, si, u1, u2))
-    }
-    #[inline]
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        dispatch!(self, b => b.albedo(store, si))
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        dispatch!(self, b => b.write_context(store, si, nodes))
     }
 }
 
@@ -264,11 +396,29 @@ impl Bsdf {
             }
         };
         node.check_all_used()?;
+        if b.context_len() > MAX_CONTEXT_NODES {
+            return Err(node.error(format!(
+                "nests {} BSDFs (wrappers included, one side of a twosided) where a surface can use at most {MAX_CONTEXT_NODES}",
+                b.context_len()
+            )));
+        }
         b.parameters_changed(&ctx.store);
         if let Some(p) = shared {
             ctx.shared_bsdfs.insert(p, b.clone());
         }
         Ok(b)
+    }
+
+    /// The BSDF at the surface vertex `si` (see [`BsdfContext`]): build it
+    /// once per vertex and use it for everything the BSDF does there.
+    pub fn context<'a, R: Real>(
+        &'a self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+    ) -> BsdfContext<'a, R> {
+        let mut context = BsdfContext::empty();
+        context.set(self, store, si);
+        context
     }
 
     /// Recomputes what a BSDF derives from its parameters (sampling
@@ -288,27 +438,6 @@ impl Bsdf {
 
 // ---------------------------------------------------------------------------
 // Helpers shared by the plugins
-
-/// The primal (f32) copy of a surface interaction, for evaluating textures
-/// in `pdf` and `sample` without recording derivatives.
-pub(crate) fn detach_si<R: Real>(si: &SurfaceInteraction<R>) -> SurfaceInteraction<f32> {
-    let c = |v: V3<R>| V3::<f32>::from(v.val());
-    SurfaceInteraction {
-        t: si.t.val(),
-        p: c(si.p),
-        n: c(si.n),
-        sh_frame: Frame {
-            s: c(si.sh_frame.s),
-            t: c(si.sh_frame.t),
-            n: c(si.sh_frame.n),
-        },
-        uv: V2::new(si.uv.x.val(), si.uv.y.val()),
-        wi: c(si.wi),
-        area_scale: si.area_scale.val(),
-        shape: si.shape,
-        prim: si.prim,
-    }
-}
 
 /// Mitsuba's optional `specular_reflectance` / `specular_transmittance`:
 /// an RGB factor in [0, 1] (value or texture) that modulates a specular
@@ -337,16 +466,21 @@ pub(crate) fn specular_factors(
     Ok((reflectance, transmittance))
 }
 
-/// `value` times the optional specular factor evaluated at `si` (unchanged
-/// when the factor was not given).
-pub(crate) fn modulate<R: Real>(
-    value: Spectrum<R>,
+/// An optional specular factor's value at `si` (`None` when the factor
+/// was not given).
+pub(crate) fn eval_factor<R: Real>(
     factor: &Option<Texture>,
     store: &ParamView,
     si: &SurfaceInteraction<R>,
-) -> Spectrum<R> {
+) -> Option<Spectrum<R>> {
+    factor.as_ref().map(|t| t.eval(store, si))
+}
+
+/// `value` times the optional specular factor's value (unchanged when the
+/// factor was not given).
+pub(crate) fn modulate<R: Real>(value: Spectrum<R>, factor: Option<Spectrum<R>>) -> Spectrum<R> {
     match factor {
-        Some(t) => value.mul_elem(t.eval(store, si)),
+        Some(t) => value.mul_elem(t),
         None => value,
     }
 }
@@ -464,15 +598,13 @@ fn rekey(node: &Node, key: &str) -> Node {
 /// random) and its weight `eval(wo) / pdf`; `None` where the density is 0.
 /// `wo` enters as a constant: a sampled direction is a variable of
 /// integration, not a function of the parameters.
-pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
-    b: &B,
-    store: &ParamView,
-    si: &SurfaceInteraction<R>,
+pub(crate) fn smooth_sample<R: Real>(
+    b: &impl BsdfContextT<R>,
     wo: Vec3,
     eta: f32,
     lobe: BsdfFlags,
 ) -> Option<BsdfSample<R>> {
-    let pdf = b.pdf(store, si, wo);
+    let pdf = b.pdf(wo);
     if !(pdf > 0.0) {
         return None;
     }
@@ -480,7 +612,7 @@ pub(crate) fn smooth_sample<R: Real, B: BsdfT>(
     Some(BsdfSample {
         wo,
         pdf,
-        weight: b.eval(store, si, wo).scale(1.0 / pdf),
+        weight: b.eval(wo).scale(1.0 / pdf),
         eta,
         lobe,
     })
@@ -499,19 +631,18 @@ pub(crate) type Transmitted<R> = (V3<R>, R, f32, BsdfFlags);
 /// transmitted one `value / (1 − F)` times `specular_transmittance`.
 /// `None` when the transmission was chosen but has probability 0.
 pub(crate) fn sample_reflect_or_transmit<R: Real>(
-    store: &ParamView,
-    si: &SurfaceInteraction<R>,
+    wi: V3<R>,
     f: R,
-    specular_reflectance: &Option<Texture>,
-    specular_transmittance: &Option<Texture>,
+    specular_reflectance: Option<Spectrum<R>>,
+    specular_transmittance: Option<Spectrum<R>>,
     u1: f32,
     transmitted: Transmitted<R>,
 ) -> Option<BsdfSample<R>> {
     let r = f.val();
     let t = 1.0 - r;
     if u1 < r {
-        let w = modulate(V3::splat(f / r), specular_reflectance, store, si);
-        return Some(BsdfSample::specular_reflection(si.wi, r, w));
+        let w = modulate(V3::splat(f / r), specular_reflectance);
+        return Some(BsdfSample::specular_reflection(wi, r, w));
     }
     if !(t > 0.0) {
         return None;
@@ -520,7 +651,7 @@ pub(crate) fn sample_reflect_or_transmit<R: Real>(
     Some(BsdfSample {
         wo,
         pdf: t,
-        weight: modulate(V3::splat(value / t), specular_transmittance, store, si),
+        weight: modulate(V3::splat(value / t), specular_transmittance),
         eta,
         lobe,
     })
@@ -544,13 +675,8 @@ pub(crate) fn chosen_with<R: Real>(mut bs: BsdfSample<R>, prob: f32, prob_r: R) 
 
 /// Mitsuba's default `eval_diffuse_reflectance`: `π f(wi, +z) cos`, used
 /// as the albedo of BSDFs without a diffuse colour.
-pub(crate) fn default_albedo<R: Real, B: BsdfT>(
-    b: &B,
-    store: &ParamView,
-    si: &SurfaceInteraction<R>,
-) -> Spectrum<R> {
-    b.eval(store, si, V3::cst(Vec3::Z))
-        .scale(std::f32::consts::PI)
+pub(crate) fn default_albedo<R: Real>(b: &impl BsdfContextT<R>) -> Spectrum<R> {
+    b.eval(V3::cst(Vec3::Z)).scale(std::f32::consts::PI)
 }
 
 #[cfg(test)]
@@ -574,6 +700,38 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("unknown parameter 'reflectanse'"), "{e}");
+    }
+
+    /// A BSDF whose context would not fit in a [`BsdfContext`] is refused
+    /// when loaded.
+    #[test]
+    fn bsdfs_nested_beyond_the_context_size_are_refused() {
+        // k blends of a blend and a diffuse: 2k + 1 nodes
+        fn blends(key: &str, k: usize) -> Node {
+            if k == 0 {
+                return node_with_key("diffuse", key, &[]);
+            }
+            let inner = blends(&format!("{key}.a"), k - 1);
+            node_with_key(
+                "blendbsdf",
+                key,
+                &[
+                    ("weight", float(0.5)),
+                    ("a", Value::Node(Rc::new(inner))),
+                    ("c", nested(key, "c", "diffuse", &[])),
+                ],
+            )
+        }
+        let fits = blends("b", (MAX_CONTEXT_NODES - 1) / 2);
+        let b = Bsdf::from_node(&fits, &mut LoadContext::default()).unwrap();
+        assert_eq!(b.context_len(), MAX_CONTEXT_NODES - 1);
+        let e = Bsdf::from_node(&blends("b", MAX_CONTEXT_NODES / 2), &mut Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nests 9 BSDFs") && e.contains("at most 8"),
+            "{e}"
+        );
     }
 
     /// One configuration of every plugin.
@@ -623,8 +781,8 @@ mod tests {
                         (k * 7 % 16) as f32 / 16.0 + 0.01,
                         (k * 5 % 16) as f32 / 16.0 + 0.02,
                     );
-                    let a = b.sample(&store.primal(), &sf, u1, u2);
-                    let d = b.sample(&store.primal(), &sd, u1, u2);
+                    let a = b.context(&store.primal(), &sf).sample(u1, u2);
+                    let d = b.context(&store.primal(), &sd).sample(u1, u2);
                     match (a, d) {
                         (None, None) => {}
                         (Some(a), Some(d)) => {
@@ -634,8 +792,11 @@ mod tests {
                                 "{plugin}"
                             );
                             assert_eq!(a.weight.val(), d.weight.val(), "{plugin}");
-                            let fa = b.eval(&store.primal(), &sf, a.wo).val();
-                            let fd = b.eval(&store.primal(), &sd, V3::cst(a.wo.val())).val();
+                            let fa = b.context(&store.primal(), &sf).eval(a.wo).val();
+                            let fd = b
+                                .context(&store.primal(), &sd)
+                                .eval(V3::cst(a.wo.val()))
+                                .val();
                             assert_eq!(fa, fd, "{plugin}");
                         }
                         (a, d) => panic!("{plugin}: {a:?} vs {d:?}"),

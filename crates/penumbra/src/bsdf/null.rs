@@ -1,7 +1,7 @@
 //! `null`: an index-matched, invisible surface (medium boundaries,
 //! cut-outs): light passes straight through.
 
-use super::{BsdfFlags, BsdfSample, BsdfT};
+use super::{BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -24,22 +24,38 @@ impl BsdfT for Null {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::NULL.union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
-        0.0
-    }
-    fn sample<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         _: &ParamView,
         si: &SurfaceInteraction<R>,
-        _u1: f32,
-        _u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        Some(BsdfSample::pass_through(si.wi, 1.0, V3::splat(R::cst(1.0))))
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Null(NullContext { wi: si.wi }));
+        1
     }
-    fn albedo<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+}
+
+/// [`Null`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct NullContext<R: Real> {
+    wi: V3<R>,
+}
+
+impl<R: Real> BsdfContextT<R> for NullContext<R> {
+    fn eval(&self, _: V3<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf(&self, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample(&self, _u1: f32, _u2: Vec2) -> Option<BsdfSample<R>> {
+        Some(BsdfSample::pass_through(
+            self.wi,
+            1.0,
+            V3::splat(R::cst(1.0)),
+        ))
+    }
+    fn albedo(&self) -> Spectrum<R> {
         V3::zero()
     }
 }
@@ -47,7 +63,7 @@ impl BsdfT for Null {
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{BsdfFlags, BsdfT};
+    use super::super::{BsdfContextT, BsdfFlags};
 
     #[test]
     fn passes_through() {
@@ -55,7 +71,8 @@ mod tests {
         check_direction_derivatives(&b, &store, 3);
         for wi in [dir(0.3, 1.0), dir(-0.8, 2.0)] {
             let bs = b
-                .sample(&store.primal(), &si::<f32>(wi), 0.5, glam::Vec2::ZERO)
+                .context(&store.primal(), &si::<f32>(wi))
+                .sample(0.5, glam::Vec2::ZERO)
                 .unwrap();
             assert_eq!(bs.lobe, BsdfFlags::NULL);
             assert_eq!(bs.wo.val(), -wi);

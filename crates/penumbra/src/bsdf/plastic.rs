@@ -6,7 +6,8 @@
 
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance};
 use super::{
-    eta_props, modulate, scalar_param, smooth_sample, specular_factor, BsdfFlags, BsdfSample, BsdfT,
+    eta_props, eval_factor, modulate, scalar_param, smooth_sample, specular_factor, BsdfContextT,
+    BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -126,23 +127,46 @@ impl BsdfT for Plastic {
         BsdfFlags::DELTA_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        let cos_i = si.wi.z;
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::Plastic(PlasticContext {
+            bsdf: self,
+            wi: si.wi,
+            eta: store.read::<R>(self.eta, 0),
+            diffuse_reflectance: self.diffuse_reflectance.eval(store, si),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`Plastic`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct PlasticContext<'a, R: Real> {
+    bsdf: &'a Plastic,
+    wi: V3<R>,
+    eta: R,
+    diffuse_reflectance: Spectrum<R>,
+    specular_reflectance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for PlasticContext<'_, R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        let cos_i = self.wi.z;
         if !(cos_i.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
-        let eta = store.read::<R>(self.eta, 0);
+        let eta = self.eta;
         let t_i = -fresnel_dielectric(cos_i, eta).0 + 1.0;
         let t_o = -fresnel_dielectric(wo.z, eta).0 + 1.0;
         let f_int = fresnel_diffuse_reflectance(eta.recip());
         coated_diffuse(
-            self.diffuse_reflectance.eval(store, si),
-            self.nonlinear,
+            self.diffuse_reflectance,
+            self.bsdf.nonlinear,
             f_int,
             eta,
             t_i,
@@ -151,47 +175,39 @@ impl BsdfT for Plastic {
         )
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let cos_i = si.wi.z.val();
+    fn pdf(&self, wo: Vec3) -> f32 {
+        let cos_i = self.wi.z.val();
         if !(cos_i > 0.0 && wo.z > 0.0) {
             return 0.0;
         }
-        let f_i = fresnel_dielectric(cos_i, store.value(self.eta, 0)).0;
-        let pd = 1.0 - specular_probability(f_i, self.specular_sampling_weight);
+        let f_i = fresnel_dielectric(cos_i, self.eta.val()).0;
+        let pd = 1.0 - specular_probability(f_i, self.bsdf.specular_sampling_weight);
         warp::square_to_cosine_hemisphere_pdf(wo) * pd
     }
 
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        let wi = si.wi.val();
-        if !(wi.z > 0.0) {
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        if !(self.wi.z.val() > 0.0) {
             return None;
         }
-        let eta = store.read::<R>(self.eta, 0);
-        let f_i = fresnel_dielectric(si.wi.z, eta).0;
-        let ps = specular_probability(f_i.val(), self.specular_sampling_weight);
+        let f_i = fresnel_dielectric(self.wi.z, self.eta).0;
+        let ps = specular_probability(f_i.val(), self.bsdf.specular_sampling_weight);
         if u1 < ps {
-            let w = modulate(V3::splat(f_i / ps), &self.specular_reflectance, store, si);
-            return Some(BsdfSample::specular_reflection(si.wi, ps, w));
+            let w = modulate(V3::splat(f_i / ps), self.specular_reflectance);
+            return Some(BsdfSample::specular_reflection(self.wi, ps, w));
         }
         let wo = warp::square_to_cosine_hemisphere(u2);
-        smooth_sample(self, store, si, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
+        smooth_sample(self, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        self.diffuse_reflectance.eval(store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        self.diffuse_reflectance
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{BsdfFlags, BsdfT};
+    use super::super::{BsdfContextT, BsdfFlags};
     use crate::bsdf::fresnel::fresnel_dielectric;
     use glam::Vec2;
 
@@ -211,13 +227,15 @@ mod tests {
         let (b, store) = build("plastic", &[]);
         let wi = dir(0.5, 0.3);
         let bs = b
-            .sample(&store.primal(), &si::<f32>(wi), 0.0, Vec2::splat(0.5))
+            .context(&store.primal(), &si::<f32>(wi))
+            .sample(0.0, Vec2::splat(0.5))
             .unwrap();
         assert_eq!(bs.lobe, BsdfFlags::DELTA_REFLECTION);
         let f = fresnel_dielectric(0.5f32, 1.49 / 1.000277).0;
         assert!((bs.weight.x * bs.pdf - f).abs() < 1e-6, "{bs:?}");
         assert!(b
-            .sample(&store.primal(), &si::<f32>(-wi), 0.0, Vec2::splat(0.5))
+            .context(&store.primal(), &si::<f32>(-wi))
+            .sample(0.0, Vec2::splat(0.5))
             .is_none());
     }
 

@@ -2,10 +2,13 @@
 //! Torrance with Walter et al. 2007's normalisation:
 //! `f cos θo = F(⟨wi,m⟩) D(m) G(wi,wo,m) / (4 cos θi)`, `m = (wi+wo)/|wi+wo|`.
 
-use super::conductor::ConductorIor;
+use super::conductor::{ConductorIor, ConductorIorValue};
 use super::fresnel::reflect;
-use super::microfacet::Roughness;
-use super::{default_albedo, detach_si, modulate, specular_factor, BsdfFlags, BsdfSample, BsdfT};
+use super::microfacet::{MicrofacetDistribution, Roughness};
+use super::{
+    default_albedo, eval_factor, modulate, specular_factor, BsdfContextT, BsdfFlags, BsdfSample,
+    BsdfT, NodeContext,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -44,34 +47,49 @@ impl BsdfT for RoughConductor {
         BsdfFlags::GLOSSY_REFLECTION
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        let wi = si.wi;
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::RoughConductor(RoughConductorContext {
+            wi: si.wi,
+            distr: self.roughness.distribution(store, si),
+            ior: self.ior.eval(store, si),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`RoughConductor`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct RoughConductorContext<R: Real> {
+    wi: V3<R>,
+    distr: MicrofacetDistribution<R>,
+    ior: ConductorIorValue<R>,
+    specular_reflectance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for RoughConductorContext<R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        let wi = self.wi;
         if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
         let m = (wi + wo).normalize();
-        let distr = self.roughness.distribution(store, si);
-        let d = distr.eval(m);
+        let d = self.distr.eval(m);
         if d.val() == 0.0 {
             return V3::zero();
         }
-        let g = distr.g(wi, wo, m);
-        let f = self.ior.fresnel(store, si, wi.dot(m));
-        modulate(
-            f * (d * g / (wi.z * 4.0)),
-            &self.specular_reflectance,
-            store,
-            si,
-        )
+        let g = self.distr.g(wi, wo, m);
+        let f = self.ior.fresnel(wi.dot(m));
+        modulate(f * (d * g / (wi.z * 4.0)), self.specular_reflectance)
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let wi = si.wi.val();
+    fn pdf(&self, wo: Vec3) -> f32 {
+        let wi = self.wi.val();
         if !(wi.z > 0.0 && wo.z > 0.0) {
             return 0.0;
         }
@@ -80,30 +98,22 @@ impl BsdfT for RoughConductor {
         if !(wi.dot(m) > 0.0 && wo.dot(m) > 0.0) {
             return 0.0;
         }
-        let distr = self.roughness.distribution(store, &detach_si(si));
-        distr.pdf(wi, m) / (4.0 * wo.dot(m))
+        self.distr.detach().pdf(wi, m) / (4.0 * wo.dot(m))
     }
 
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        _u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        let wi = si.wi.val();
+    fn sample(&self, _u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        let wi = self.wi.val();
         if !(wi.z > 0.0) {
             return None;
         }
-        let distr = self.roughness.distribution(store, &detach_si(si));
-        let (m, pdf_m) = distr.sample(wi, u2);
+        let (m, pdf_m) = self.distr.detach().sample(wi, u2);
         let wo = reflect(V3::from(wi), V3::from(m)).val();
         if !(pdf_m > 0.0 && wo.z > 0.0 && wo.dot(m) > 0.0) {
             return None;
         }
         let pdf = pdf_m / (4.0 * wo.dot(m));
         let wo = V3::cst(wo);
-        let f = self.eval(store, si, wo);
+        let f = self.eval(wo);
         Some(BsdfSample {
             wo,
             pdf,
@@ -113,15 +123,15 @@ impl BsdfT for RoughConductor {
         })
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        default_albedo(self, store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        default_albedo(self)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::BsdfT;
+    use super::super::BsdfContextT;
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::params::ParamStore;
@@ -193,15 +203,17 @@ mod tests {
             let seeds = Seeds::tangents(&store, &[("b.alpha.value", &[1.0])]).unwrap();
             let wi = dir(0.7, 0.2);
             for wo in [dir(0.6, 3.0), dir(0.8, 3.3), dir(0.3, 2.5)] {
-                let d = b.eval(&store.view(&seeds), &si::<Dual>(wi), V3::cst(wo));
-                let f = b.eval(&store.primal(), &si::<f32>(wi), V3::cst(wo));
+                let d = b
+                    .context(&store.view(&seeds), &si::<Dual>(wi))
+                    .eval(V3::cst(wo));
+                let f = b.context(&store.primal(), &si::<f32>(wi)).eval(V3::cst(wo));
                 assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z], "primal differs");
                 let h = 1e-3;
                 let mut s2 = store.clone();
                 s2.set("b.alpha.value", &[0.2 + h]).unwrap();
-                let fp = b.eval(&s2.primal(), &si::<f32>(wi), V3::cst(wo));
+                let fp = b.context(&s2.primal(), &si::<f32>(wi)).eval(V3::cst(wo));
                 s2.set("b.alpha.value", &[0.2 - h]).unwrap();
-                let fm = b.eval(&s2.primal(), &si::<f32>(wi), V3::cst(wo));
+                let fm = b.context(&s2.primal(), &si::<f32>(wi)).eval(V3::cst(wo));
                 let fd = (fp.y - fm.y) / (2.0 * h);
                 assert!(
                     (d.y.d - fd).abs() <= 0.01 * fd.abs() + 1e-3,
@@ -242,7 +254,11 @@ mod tests {
                 for j in 0..nphi {
                     let phi = (j as f32 + 0.5) / nphi as f32 * std::f32::consts::TAU;
                     let w = dir(z, phi);
-                    sum += (b.eval(&store.primal(), &si::<f32>(wi), V3::cst(w)).y * h(w)) as f64;
+                    sum += (b
+                        .context(&store.primal(), &si::<f32>(wi))
+                        .eval(V3::cst(w))
+                        .y
+                        * h(w)) as f64;
                 }
             }
             sum * std::f64::consts::TAU / (nz * nphi) as f64
@@ -261,7 +277,10 @@ mod tests {
         let (mut det, mut det2, mut mix, mut mix2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
         for _ in 0..n {
             let (u1, u2) = (rng.next_f32(), rng.next_2d());
-            let Some(bs) = b.sample::<Dual>(&store.view(&seeds), &si::<Dual>(wi), u1, u2) else {
+            let Some(bs) = b
+                .context(&store.view(&seeds), &si::<Dual>(wi))
+                .sample(u1, u2)
+            else {
                 continue;
             };
             let hw = h(bs.wo.val()) as f64;
@@ -271,9 +290,9 @@ mod tests {
             let f = (bs.weight.y.v * bs.pdf) as f64;
             let df = bs.weight.y.d as f64 * bs.pdf as f64;
             s2.set("b.alpha.value", &[alpha + eps]).unwrap();
-            let pp = b.pdf(&s2.primal(), &si::<f32>(wi), bs.wo.val()) as f64;
+            let pp = b.context(&s2.primal(), &si::<f32>(wi)).pdf(bs.wo.val()) as f64;
             s2.set("b.alpha.value", &[alpha - eps]).unwrap();
-            let pm = b.pdf(&s2.primal(), &si::<f32>(wi), bs.wo.val()) as f64;
+            let pm = b.context(&s2.primal(), &si::<f32>(wi)).pdf(bs.wo.val()) as f64;
             let p = bs.pdf as f64;
             let dp = (pp - pm) / (2.0 * eps as f64);
             let m = (df * p - f * dp) / (p * p) * hw;

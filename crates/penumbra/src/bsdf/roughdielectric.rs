@@ -3,10 +3,10 @@
 //! Surfaces" (reflection: F D G / (4 |cos θi|); transmission: eq. 21).
 
 use super::fresnel::{fresnel_dielectric, reflect, refract};
-use super::microfacet::Roughness;
+use super::microfacet::{MicrofacetDistribution, Roughness};
 use super::{
-    default_albedo, detach_si, eta_props, modulate, scalar_param, smooth_sample, specular_factors,
-    BsdfFlags, BsdfSample, BsdfT,
+    default_albedo, eta_props, eval_factor, modulate, scalar_param, smooth_sample,
+    specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -77,14 +77,37 @@ impl BsdfT for RoughDielectric {
             .union(BsdfFlags::TWO_SIDED)
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        let eta_p = store.read::<R>(self.eta, 0);
-        let wi = si.wi;
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::RoughDielectric(RoughDielectricContext {
+            wi: si.wi,
+            eta: store.read::<R>(self.eta, 0),
+            distr: self.roughness.distribution(store, si),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+            specular_transmittance: eval_factor(&self.specular_transmittance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`RoughDielectric`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct RoughDielectricContext<R: Real> {
+    wi: V3<R>,
+    eta: R,
+    distr: MicrofacetDistribution<R>,
+    specular_reflectance: Option<Spectrum<R>>,
+    specular_transmittance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for RoughDielectricContext<R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        let eta_p = self.eta;
+        let wi = self.wi;
         let cos_i = wi.z;
         if cos_i.val() == 0.0 || wo.z.val() == 0.0 {
             return V3::zero();
@@ -99,30 +122,29 @@ impl BsdfT for RoughDielectric {
         if m.z.val() < 0.0 {
             m = -m;
         }
-        let distr = self.roughness.distribution(store, si);
-        let d = distr.eval(m);
+        let d = self.distr.eval(m);
         if d.val() == 0.0 {
             return V3::zero();
         }
-        let g = distr.g(wi, wo, m);
+        let g = self.distr.g(wi, wo, m);
         let (f, ..) = fresnel_dielectric(wi.dot(m), eta_p);
         if reflect {
             let v = f * d * g / (cos_i.abs() * 4.0);
-            modulate(V3::splat(v), &self.specular_reflectance, store, si)
+            modulate(V3::splat(v), self.specular_reflectance)
         } else {
             let wim = wi.dot(m);
             let wom = wo.dot(m);
             let denom = wim + eta * wom;
             // η² of the Jacobian × 1/η² of radiance scaling = 1
             let v = ((-f + 1.0) * d * g * wim * wom / (cos_i * denom * denom)).abs();
-            modulate(V3::splat(v), &self.specular_transmittance, store, si)
+            modulate(V3::splat(v), self.specular_transmittance)
         }
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let wi = si.wi.val();
-        let eta_p = store.value(self.eta, 0);
-        let Some((m, reflect)) = Self::half_vector(wi, wo, eta_p) else {
+    fn pdf(&self, wo: Vec3) -> f32 {
+        let wi = self.wi.val();
+        let eta_p = self.eta.val();
+        let Some((m, reflect)) = RoughDielectric::half_vector(wi, wo, eta_p) else {
             return 0.0;
         };
         // micro- and macro-surface must agree on the sides
@@ -136,7 +158,7 @@ impl BsdfT for RoughDielectric {
             let den = wi.dot(m) + eta * wo.dot(m);
             eta * eta * wo.dot(m) / (den * den)
         };
-        let distr = self.roughness.distribution(store, &detach_si(si));
+        let distr = self.distr.detach();
         let wi_up = if wi.z < 0.0 { -wi } else { wi };
         let mut p = distr.pdf(wi_up, m);
         let f = fresnel_dielectric(wi.dot(m), eta_p).0;
@@ -144,19 +166,13 @@ impl BsdfT for RoughDielectric {
         p * dwh_dwo.abs()
     }
 
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        let wi = si.wi.val();
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        let wi = self.wi.val();
         if wi.z == 0.0 {
             return None;
         }
-        let eta_p = store.value(self.eta, 0);
-        let distr = self.roughness.distribution(store, &detach_si(si));
+        let eta_p = self.eta.val();
+        let distr = self.distr.detach();
         let wi_up = if wi.z < 0.0 { -wi } else { wi };
         let (m, pdf_m) = distr.sample(wi_up, u2);
         // back-facing microfacets (possible without visible-normal
@@ -179,18 +195,18 @@ impl BsdfT for RoughDielectric {
         if same_side != (lobe == BsdfFlags::GLOSSY_REFLECTION) || wo.z == 0.0 {
             return None;
         }
-        smooth_sample(self, store, si, wo, eta, lobe)
+        smooth_sample(self, wo, eta, lobe)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        default_albedo(self, store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        default_albedo(self)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::BsdfT;
+    use super::super::BsdfContextT;
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::scene::Value;
@@ -284,8 +300,10 @@ mod tests {
         // f32 and Dual give identical primal values
         let wi = glam::Vec3::new(0.3, 0.1, 0.9).normalize();
         let wo = glam::Vec3::new(-0.2, -0.1, -0.95).normalize();
-        let a = b.eval(&store.primal(), &si::<f32>(wi), V3::cst(wo));
-        let d = b.eval(&store.primal(), &si::<Dual>(wi), V3::cst(wo));
+        let a = b.context(&store.primal(), &si::<f32>(wi)).eval(V3::cst(wo));
+        let d = b
+            .context(&store.primal(), &si::<Dual>(wi))
+            .eval(V3::cst(wo));
         assert_eq!(a.x, d.x.v);
     }
 }

@@ -11,7 +11,10 @@ use super::microfacet::{
     beckmann_visible_slope_x, erfinv, sample_ggx_visible, MicrofacetDistribution, MicrofacetType,
 };
 use super::plastic::{coated_diffuse, coated_diffuse_props, sampling_weight, specular_probability};
-use super::{eta_props, modulate, scalar_param, smooth_sample, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    eta_props, eval_factor, modulate, scalar_param, smooth_sample, BsdfContextT, BsdfFlags,
+    BsdfSample, BsdfT, NodeContext,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -91,11 +94,6 @@ impl RoughPlastic {
             self.internal_reflectance = r;
             self.table_key = key;
         }
-    }
-
-    fn distr<R: Real>(&self, store: &ParamView) -> MicrofacetDistribution<R> {
-        let a = store.read::<R>(self.alpha, 0);
-        MicrofacetDistribution::new(self.kind, a, a, self.sample_visible)
     }
 
     /// Table lookup with linear interpolation in cos θ (differentiable in
@@ -242,19 +240,45 @@ impl BsdfT for RoughPlastic {
         BsdfFlags::GLOSSY_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
-        let wi = si.wi;
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        let alpha = store.read::<R>(self.alpha, 0);
+        nodes[0] = Some(NodeContext::RoughPlastic(RoughPlasticContext {
+            bsdf: self,
+            wi: si.wi,
+            eta: store.read::<R>(self.eta, 0),
+            distr: MicrofacetDistribution::new(self.kind, alpha, alpha, self.sample_visible),
+            diffuse_reflectance: self.diffuse_reflectance.eval(store, si),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`RoughPlastic`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct RoughPlasticContext<'a, R: Real> {
+    bsdf: &'a RoughPlastic,
+    wi: V3<R>,
+    eta: R,
+    distr: MicrofacetDistribution<R>,
+    diffuse_reflectance: Spectrum<R>,
+    specular_reflectance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for RoughPlasticContext<'_, R> {
+    fn eval(&self, wo: V3<R>) -> Spectrum<R> {
+        let wi = self.wi;
         if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
         }
-        let eta = store.read::<R>(self.eta, 0);
+        let eta = self.eta;
         // specular: rough dielectric reflection
-        let distr = self.distr::<R>(store);
+        let distr = self.distr;
         let m = (wi + wo).normalize();
         let d = distr.eval(m);
         let mut spec = if d.val() > 0.0 {
@@ -263,13 +287,13 @@ impl BsdfT for RoughPlastic {
         } else {
             V3::zero()
         };
-        spec = modulate(spec, &self.specular_reflectance, store, si);
-        let t_i = self.transmittance(wi.z);
-        let t_o = self.transmittance(wo.z);
+        spec = modulate(spec, self.specular_reflectance);
+        let t_i = self.bsdf.transmittance(wi.z);
+        let t_o = self.bsdf.transmittance(wo.z);
         let diff = coated_diffuse(
-            self.diffuse_reflectance.eval(store, si),
-            self.nonlinear,
-            R::cst(self.internal_reflectance),
+            self.diffuse_reflectance,
+            self.bsdf.nonlinear,
+            R::cst(self.bsdf.internal_reflectance),
             eta,
             t_i,
             t_o,
@@ -278,38 +302,31 @@ impl BsdfT for RoughPlastic {
         spec + diff
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let wi = si.wi.val();
+    fn pdf(&self, wo: Vec3) -> f32 {
+        let wi = self.wi.val();
         if !(wi.z > 0.0 && wo.z > 0.0) {
             return 0.0;
         }
-        let t_i = self.transmittance(wi.z);
-        let ps = specular_probability(1.0 - t_i, self.specular_sampling_weight);
+        let t_i = self.bsdf.transmittance(wi.z);
+        let ps = specular_probability(1.0 - t_i, self.bsdf.specular_sampling_weight);
         let m = (wi + wo).normalize();
-        let distr = self.distr::<f32>(store);
         let p_spec = if wi.dot(m) > 0.0 && wo.dot(m) > 0.0 {
-            distr.pdf(wi, m) / (4.0 * wo.dot(m))
+            self.distr.detach().pdf(wi, m) / (4.0 * wo.dot(m))
         } else {
             0.0
         };
         ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo)
     }
 
-    fn sample<R: Real>(
-        &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
-        u1: f32,
-        u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        let wi = si.wi.val();
+    fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
+        let wi = self.wi.val();
         if !(wi.z > 0.0) {
             return None;
         }
-        let t_i = self.transmittance(wi.z);
-        let ps = specular_probability(1.0 - t_i, self.specular_sampling_weight);
+        let t_i = self.bsdf.transmittance(wi.z);
+        let ps = specular_probability(1.0 - t_i, self.bsdf.specular_sampling_weight);
         let (wo, lobe) = if u1 < ps {
-            let (m, _) = self.distr::<f32>(store).sample(wi, u2);
+            let (m, _) = self.distr.detach().sample(wi, u2);
             (
                 reflect(V3::from(wi), V3::from(m)).val(),
                 BsdfFlags::GLOSSY_REFLECTION,
@@ -323,11 +340,11 @@ impl BsdfT for RoughPlastic {
         if !(wo.z > 0.0) {
             return None;
         }
-        smooth_sample(self, store, si, wo, 1.0, lobe)
+        smooth_sample(self, wo, 1.0, lobe)
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        self.diffuse_reflectance.eval(store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        self.diffuse_reflectance
     }
 }
 
@@ -400,7 +417,9 @@ mod tests {
                 (p - p_ref).abs() <= tp * p_ref + 1e-7,
                 "{dist} pdf {p} vs {p_ref}"
             );
-            let d = b.eval(&store.primal(), &si::<Dual>(wi), V3::cst(wo));
+            let d = b
+                .context(&store.primal(), &si::<Dual>(wi))
+                .eval(V3::cst(wo));
             assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z]);
         }
     }

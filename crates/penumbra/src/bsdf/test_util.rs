@@ -3,7 +3,7 @@
 //! consistency checks of sampling, Monte Carlo albedo estimates, and the
 //! check of derivatives with respect to the directions.
 
-use super::{Bsdf, BsdfFlags, BsdfT};
+use super::{Bsdf, BsdfContextT, BsdfFlags, BsdfT};
 use crate::ad::{Dual, Real};
 use crate::error::SrcLoc;
 use crate::geometry::SurfaceInteraction;
@@ -88,11 +88,13 @@ pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
 }
 
 pub fn eval_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> Vec3 {
-    b.eval(&store.primal(), &si::<f32>(wi), V3::cst(wo)).val()
+    b.context(&store.primal(), &si::<f32>(wi))
+        .eval(V3::cst(wo))
+        .val()
 }
 
 pub fn pdf_f32(b: &Bsdf, store: &ParamStore, wi: Vec3, wo: Vec3) -> f32 {
-    b.pdf(&store.primal(), &si::<f32>(wi), wo)
+    b.context(&store.primal(), &si::<f32>(wi)).pdf(wo)
 }
 
 fn close(a: f32, b: f32, rel: f32) -> bool {
@@ -108,7 +110,7 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
     check_direction_derivatives(b, store, 7);
     let threshold = 1e-3 / (wis.len() * tests_in_fn) as f64;
     for (i, &wi) in wis.iter().enumerate() {
-        let s = si::<f32>(wi);
+        let ctx = b.context(&store.primal(), &si::<f32>(wi));
         // default pdf integration (12² points per bin): lobes narrower than
         // ~0.1 rad at the pole need more (alpha ≥ 0.1 is tested)
         let t = Chi2Test {
@@ -121,21 +123,21 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
             |rng: &mut Pcg32| {
                 let u1 = rng.next_f32();
                 let u2 = rng.next_2d();
-                let bs = b.sample(&store.primal(), &s, u1, u2)?;
+                let bs = ctx.sample(u1, u2)?;
                 assert!(bs.weight.is_finite() && bs.pdf > 0.0, "wi {wi:?}: {bs:?}");
                 if bs.lobe.has(BsdfFlags::DELTA) {
                     return None;
                 }
                 if checked < 2000 {
                     checked += 1;
-                    let p = b.pdf(&store.primal(), &s, bs.wo.val());
+                    let p = ctx.pdf(bs.wo.val());
                     assert!(
                         close(p, bs.pdf, 2e-3),
                         "wi {wi:?} wo {:?}: pdf {p} vs sample pdf {}",
                         bs.wo,
                         bs.pdf
                     );
-                    let f = b.eval(&store.primal(), &s, bs.wo).val() / p;
+                    let f = ctx.eval(bs.wo).val() / p;
                     let w = bs.weight.val();
                     for c in 0..3 {
                         assert!(
@@ -147,7 +149,7 @@ pub fn check_smooth(b: &Bsdf, store: &ParamStore, wis: &[Vec3], tests_in_fn: usi
                 }
                 Some(bs.wo.val())
             },
-            |wo| b.pdf(&store.primal(), &s, wo),
+            |wo| ctx.pdf(wo),
         );
         assert!(r.p_value > threshold, "{b:?} wi {wi:?}: χ² failed: {r:?}");
         assert!(
@@ -169,13 +171,13 @@ pub fn albedo_estimate(
     n: usize,
     seed: u64,
 ) -> (Vec3, Vec3) {
-    let s = si::<f32>(wi);
+    let ctx = b.context(&store.primal(), &si::<f32>(wi));
     let mut rng = Pcg32::new(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
     for _ in 0..n {
         let u1 = rng.next_f32();
         let u2 = rng.next_2d();
-        if let Some(bs) = b.sample(&store.primal(), &s, u1, u2) {
+        if let Some(bs) = ctx.sample(u1, u2) {
             let w: Spectrum<f32> = bs.weight.scale(bs.eta * bs.eta);
             for c in 0..3 {
                 sum[c] += w[c] as f64;
@@ -205,7 +207,7 @@ pub fn albedo_quadrature(
     n: usize,
     trans_scale: f32,
 ) -> Vec3 {
-    let s = si::<f32>(wi);
+    let ctx = b.context(&store.primal(), &si::<f32>(wi));
     let (dt, dp) = (
         std::f64::consts::PI / n as f64,
         std::f64::consts::PI / n as f64,
@@ -217,7 +219,7 @@ pub fn albedo_quadrature(
         for j in 0..2 * n {
             let phi = (j as f64 + 0.5) * dp;
             let wo = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
-            let mut f = b.eval(&store.primal(), &s, V3::cst(wo)).val();
+            let mut f = ctx.eval(V3::cst(wo)).val();
             if wo.z * wi.z < 0.0 {
                 f *= trans_scale;
             }
@@ -396,8 +398,12 @@ pub fn check_direction_derivatives(b: &Bsdf, store: &ParamStore, seed: u64) {
         let what = |d: &'static str| move || format!("{b:?} #{k} wi {wi} wo {wo}: {d}");
         if wo.z.abs() >= MIN_COS {
             let value = eval_f32(b, store, wi, wo);
-            let d_wi = b.eval(&store.primal(), &with_wi(dual_dir(wi, ti)), V3::cst(wo));
-            let d_wo = b.eval(&store.primal(), &si::<Dual>(wi), dual_dir(wo, to));
+            let d_wi = b
+                .context(&store.primal(), &with_wi(dual_dir(wi, ti)))
+                .eval(V3::cst(wo));
+            let d_wo = b
+                .context(&store.primal(), &si::<Dual>(wi))
+                .eval(dual_dir(wo, to));
             let fd_wi = central_difference(|h| Some(eval_f32(b, store, turn(wi, ti, h), wo)));
             let fd_wo = central_difference(|h| Some(eval_f32(b, store, wi, turn(wo, to, h))));
             if let (Some(fd_wi), Some(fd_wo)) = (fd_wi, fd_wo) {
@@ -406,7 +412,10 @@ pub fn check_direction_derivatives(b: &Bsdf, store: &ParamStore, seed: u64) {
                 assert_derivative(tangent_of(d_wo), fd_wo, value, &what("eval along wo"));
             }
         }
-        let Some(bs) = b.sample(&store.primal(), &with_wi(dual_dir(wi, ti)), u1, u2) else {
+        let Some(bs) = b
+            .context(&store.primal(), &with_wi(dual_dir(wi, ti)))
+            .sample(u1, u2)
+        else {
             continue;
         };
         if !bs.lobe.has(BsdfFlags::DELTA) {
@@ -414,7 +423,9 @@ pub fn check_direction_derivatives(b: &Bsdf, store: &ParamStore, seed: u64) {
             continue;
         }
         let sample_at = |h: f32| {
-            let s = b.sample(&store.primal(), &si::<f32>(turn(wi, ti, h)), u1, u2)?;
+            let s = b
+                .context(&store.primal(), &si::<f32>(turn(wi, ti, h)))
+                .sample(u1, u2)?;
             (s.lobe == bs.lobe).then_some(s)
         };
         let fd_wo = central_difference(|h| sample_at(h).map(|s| s.wo.val()));

@@ -4,8 +4,8 @@
 
 use super::fresnel::fresnel_dielectric;
 use super::{
-    default_albedo, eta_props, sample_reflect_or_transmit, scalar_param, specular_factors,
-    BsdfFlags, BsdfSample, BsdfT,
+    default_albedo, eta_props, eval_factor, sample_reflect_or_transmit, scalar_param,
+    specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -47,43 +47,61 @@ impl BsdfT for ThinDielectric {
             .union(BsdfFlags::NULL)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn eval<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: V3<R>) -> Spectrum<R> {
-        V3::zero()
-    }
-    fn pdf<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>, _: Vec3) -> f32 {
-        0.0
-    }
-    fn sample<R: Real>(
-        &self,
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        u1: f32,
-        _u2: Vec2,
-    ) -> Option<BsdfSample<R>> {
-        let eta = store.read::<R>(self.eta, 0);
-        let (mut f, ..) = fresnel_dielectric(si.wi.z.abs(), eta);
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
+        nodes[0] = Some(NodeContext::ThinDielectric(ThinDielectricContext {
+            wi: si.wi,
+            eta: store.read::<R>(self.eta, 0),
+            specular_reflectance: eval_factor(&self.specular_reflectance, store, si),
+            specular_transmittance: eval_factor(&self.specular_transmittance, store, si),
+        }));
+        1
+    }
+}
+
+/// [`ThinDielectric`] at a vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct ThinDielectricContext<R: Real> {
+    wi: V3<R>,
+    eta: R,
+    specular_reflectance: Option<Spectrum<R>>,
+    specular_transmittance: Option<Spectrum<R>>,
+}
+
+impl<R: Real> BsdfContextT<R> for ThinDielectricContext<R> {
+    fn eval(&self, _: V3<R>) -> Spectrum<R> {
+        V3::zero()
+    }
+    fn pdf(&self, _: Vec3) -> f32 {
+        0.0
+    }
+    fn sample(&self, u1: f32, _u2: Vec2) -> Option<BsdfSample<R>> {
+        let (mut f, ..) = fresnel_dielectric(self.wi.z.abs(), self.eta);
         if f.val() < 1.0 {
             f = f * 2.0 / (f + 1.0);
         }
         sample_reflect_or_transmit(
-            store,
-            si,
+            self.wi,
             f,
-            &self.specular_reflectance,
-            &self.specular_transmittance,
+            self.specular_reflectance,
+            self.specular_transmittance,
             u1,
-            (-si.wi, -f + 1.0, 1.0, BsdfFlags::NULL),
+            (-self.wi, -f + 1.0, 1.0, BsdfFlags::NULL),
         )
     }
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        default_albedo(self, store, si)
+    fn albedo(&self) -> Spectrum<R> {
+        default_albedo(self)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{BsdfFlags, BsdfT};
+    use super::super::{BsdfContextT, BsdfFlags};
     use crate::ad::Dual;
     use crate::bsdf::fresnel::fresnel_dielectric;
     use crate::params::Seeds;
@@ -105,7 +123,8 @@ mod tests {
             let (mut nr, n) = (0, 4000);
             for _ in 0..n {
                 let bs = b
-                    .sample(&store.primal(), &s, rng.next_f32(), Vec2::ZERO)
+                    .context(&store.primal(), &s)
+                    .sample(rng.next_f32(), Vec2::ZERO)
                     .unwrap();
                 assert!((bs.weight.x - 1.0).abs() < 1e-5 && bs.eta == 1.0);
                 if bs.lobe == BsdfFlags::DELTA_REFLECTION {
@@ -122,7 +141,8 @@ mod tests {
         let seeds = Seeds::tangents(&store, &[("b.eta", &[1.0])]).unwrap();
         let store = store.view(&seeds);
         let bs = b
-            .sample(&store, &si::<Dual>(dir(0.5, 0.0)), 0.0, Vec2::ZERO)
+            .context(&store, &si::<Dual>(dir(0.5, 0.0)))
+            .sample(0.0, Vec2::ZERO)
             .unwrap();
         assert!(bs.weight.x.d > 0.0, "{bs:?}");
     }

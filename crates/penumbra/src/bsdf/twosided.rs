@@ -1,7 +1,9 @@
 //! `twosided`: makes one-sided (reflection-only) BSDFs reflect on both
 //! sides of the surface.
 
-use super::{nested_bsdfs, Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use super::{
+    nested_bsdfs, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NestedContext, NodeContext,
+};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
@@ -64,65 +66,96 @@ impl BsdfT for TwoSided {
             .union(BsdfFlags::TWO_SIDED)
     }
 
-    fn eval<R: Real>(
-        &self,
+    fn context_len(&self) -> usize {
+        1 + self.front.context_len().max(self.back.context_len())
+    }
+
+    /// Only the side `si.wi` is on gets a context (the front's when `wi`
+    /// is in the surface, for the albedo).
+    fn write_context<'a, R: Real>(
+        &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
-        wo: V3<R>,
-    ) -> Spectrum<R> {
+        nodes: &mut [Option<NodeContext<'a, R>>],
+    ) -> usize {
         let z = si.wi.z.val();
-        if z > 0.0 {
-            self.front.eval(store, si, wo)
+        let side = if z > 0.0 {
+            Side::Front
         } else if z < 0.0 {
-            self.back.eval(store, &flip(si), flip_v(wo))
+            Side::Back
         } else {
-            V3::zero()
+            Side::Edge
+        };
+        nodes[0] = Some(NodeContext::TwoSided(TwoSidedContext { side }));
+        1 + match side {
+            Side::Back => self.back.write_context(store, &flip(si), &mut nodes[1..]),
+            _ => self.front.write_context(store, si, &mut nodes[1..]),
+        }
+    }
+}
+
+/// Where the incident direction is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    Front,
+    /// Below the surface: directions are mirrored for the back BSDF.
+    Back,
+    /// In the surface: nothing scatters.
+    Edge,
+}
+
+/// [`TwoSided`] at a vertex: the side, followed in the [`BsdfContext`]
+/// by the context of that side's BSDF.
+///
+/// [`BsdfContext`]: super::BsdfContext
+#[derive(Clone, Copy, Debug)]
+pub struct TwoSidedContext {
+    side: Side,
+}
+
+impl TwoSidedContext {
+    pub(crate) fn eval<R: Real>(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
+        match self.side {
+            Side::Front => this.at(1).eval(wo),
+            Side::Back => this.at(1).eval(flip_v(wo)),
+            Side::Edge => V3::zero(),
         }
     }
 
-    fn pdf<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>, wo: Vec3) -> f32 {
-        let z = si.wi.z.val();
-        if z > 0.0 {
-            self.front.pdf(store, si, wo)
-        } else if z < 0.0 {
-            self.back.pdf(store, &flip(si), flip_v(V3::from(wo)).val())
-        } else {
-            0.0
+    pub(crate) fn pdf<R: Real>(&self, this: NestedContext<'_, '_, R>, wo: Vec3) -> f32 {
+        match self.side {
+            Side::Front => this.at(1).pdf(wo),
+            Side::Back => this.at(1).pdf(flip_v(V3::from(wo)).val()),
+            Side::Edge => 0.0,
         }
     }
 
-    fn sample<R: Real>(
+    pub(crate) fn sample<R: Real>(
         &self,
-        store: &ParamView,
-        si: &SurfaceInteraction<R>,
+        this: NestedContext<'_, '_, R>,
         u1: f32,
         u2: Vec2,
     ) -> Option<BsdfSample<R>> {
-        let z = si.wi.z.val();
-        if z > 0.0 {
-            self.front.sample(store, si, u1, u2)
-        } else if z < 0.0 {
-            let mut bs = self.back.sample(store, &flip(si), u1, u2)?;
-            bs.wo = flip_v(bs.wo);
-            Some(bs)
-        } else {
-            None
+        match self.side {
+            Side::Front => this.at(1).sample(u1, u2),
+            Side::Back => {
+                let mut bs = this.at(1).sample(u1, u2)?;
+                bs.wo = flip_v(bs.wo);
+                Some(bs)
+            }
+            Side::Edge => None,
         }
     }
 
-    fn albedo<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
-        if si.wi.z.val() >= 0.0 {
-            self.front.albedo(store, si)
-        } else {
-            self.back.albedo(store, &flip(si))
-        }
+    pub(crate) fn albedo<R: Real>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        this.at(1).albedo()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_util::*;
-    use super::super::{Bsdf, BsdfT};
+    use super::super::{Bsdf, BsdfContextT};
     use crate::scene::LoadContext;
 
     #[test]
@@ -169,12 +202,8 @@ mod tests {
             .id("m2.brdf_1.specular_reflectance.value")
             .is_some());
         let bs = b
-            .sample(
-                &ctx.store.primal(),
-                &si::<f32>(wi_b),
-                0.3,
-                glam::Vec2::splat(0.3),
-            )
+            .context(&ctx.store.primal(), &si::<f32>(wi_b))
+            .sample(0.3, glam::Vec2::splat(0.3))
             .unwrap();
         assert!(
             (bs.wo.val() - glam::Vec3::new(-wi.x, -wi.y, -wi.z)).length() < 1e-6,

@@ -3,7 +3,7 @@
 //! integrator.
 
 use super::Integrator;
-use crate::bsdf::BsdfT;
+use crate::bsdf::BsdfContextT;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::sampler::SampleStream;
@@ -131,7 +131,8 @@ impl AovIntegrator {
                     AovKind::ShadingNormal => si.sh_frame.n.val().to_array(),
                     AovKind::Albedo => scene
                         .shape_bsdf(h.shape)
-                        .albedo(&store, si)
+                        .context(&store, si)
+                        .albedo()
                         .val()
                         .to_array(),
                     AovKind::Uv => [si.uv.x, si.uv.y, 0.0],

@@ -3,7 +3,7 @@
 
 use super::{mis_weight, scatter};
 use crate::ad::Real;
-use crate::bsdf::{BsdfFlags, BsdfT};
+use crate::bsdf::{BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
@@ -60,17 +60,19 @@ impl DirectIntegrator {
             }
         }
         let bsdf = scene.shape_bsdf(hit.shape);
+        // its textures read once for all the samples below
+        let bsdf_ctx = bsdf.context(store, &si);
         let (ne, nb) = (self.emitter_samples as f32, self.bsdf_samples as f32);
         if bsdf.flags().has(BsdfFlags::SMOOTH) {
             for _ in 0..self.emitter_samples {
                 let u = rng.next_2d();
                 if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u) {
                     let wo = si.to_local(es.d);
-                    let f = bsdf.eval(store, &si, wo);
+                    let f = bsdf_ctx.eval(wo);
                     let w = if es.ds.delta {
                         1.0 / ne
                     } else {
-                        let pb = bsdf.pdf(store, &si, wo.val());
+                        let pb = bsdf_ctx.pdf(wo.val());
                         mis_weight(ne * es.ds.pdf, nb * pb) / ne
                     };
                     result += f.mul_elem(es.weight) * R::cst(w);
@@ -80,10 +82,10 @@ impl DirectIntegrator {
         for _ in 0..self.bsdf_samples {
             let u1 = rng.next_1d();
             let u2 = rng.next_2d();
-            let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
+            let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 continue;
             };
-            let b = scatter(scene, store, bsdf, &si, &bs);
+            let b = scatter(scene, store, &bsdf_ctx, &si, &bs);
             let d = b.ray.d;
             let (le, em_pdf) = match (b.hit, b.next) {
                 (Some(h2), Some(si2)) => match scene.shape_emitter(h2.shape) {

@@ -12,7 +12,7 @@ pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
-use crate::bsdf::{Bsdf, BsdfFlags, BsdfSample, BsdfT};
+use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::Spectrum;
@@ -120,9 +120,9 @@ pub(crate) struct Bounce<R> {
     pub delta: bool,
 }
 
-/// Traces the ray of BSDF sample `bs` from `si` and re-evaluates what it
-/// reaches in `R`, in a parameterisation of the path that does not move
-/// with the parameters (the interior term of the derivative; Zhang et al.
+/// Traces the ray of BSDF sample `bs` from `si` (`bsdf`: the BSDF there)
+/// and re-evaluates what it reaches in `R`, in a parameterisation of the
+/// path that does not move with the parameters (the interior term of the derivative; Zhang et al.
 /// 2020, "Path-Space Differentiable Rendering"; on which choices are valid:
 /// Worchel et al. 2025, arXiv 2504.05750):
 /// - after a smooth lobe, the sampled direction is a constant of the
@@ -142,7 +142,7 @@ pub(crate) struct Bounce<R> {
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
     store: &ParamView,
-    bsdf: &Bsdf,
+    bsdf: &BsdfContext<R>,
     si: &SurfaceInteraction<R>,
     bs: &BsdfSample<R>,
 ) -> Bounce<R> {
@@ -181,7 +181,7 @@ pub(crate) fn scatter<R: Real>(
         // strategies must see it through the same map)
         None => (None, V3::cst(d.val()), R::cst(1.0)),
     };
-    let f = bsdf.eval(store, si, si.to_local(wo));
+    let f = bsdf.eval(si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
     let attach = |w: R, f: R| {
         if f.val() != 0.0 {
@@ -228,4 +228,101 @@ pub(crate) fn max_depth(node: &Node) -> Result<u32> {
         return Err(node.prop_error(p, format!("must be -1 (unbounded) or >= 0, found {d}")));
     }
     Ok(if d == -1 { u32::MAX } else { d as u32 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ad::Dual;
+    use crate::params::Seeds;
+    use crate::texture::CHECKERBOARD_EVALS;
+    use glam::Vec2;
+    use std::path::Path;
+
+    /// A camera looking at a large two-sided plane whose BSDF has two
+    /// textures: a checkerboard blend weight of a roughconductor with a
+    /// checkerboard roughness and a diffuse; lit by the environment.
+    const SCENE: &str = r#"<scene version="3.0.0">
+        INTEGRATOR
+        <sensor type="perspective">
+            <float name="fov" value="30"/>
+            <transform name="to_world">
+                <lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/>
+            </transform>
+            <film type="hdrfilm">
+                <integer name="width" value="4"/>
+                <integer name="height" value="4"/>
+            </film>
+        </sensor>
+        <shape type="rectangle" id="plane">
+            <transform name="to_world"><scale value="10"/></transform>
+            <bsdf type="twosided">
+                <bsdf type="blendbsdf">
+                    <texture type="checkerboard" name="weight"/>
+                    <bsdf type="roughconductor">
+                        <texture type="checkerboard" name="alpha"/>
+                    </bsdf>
+                    <bsdf type="diffuse"/>
+                </bsdf>
+            </bsdf>
+        </shape>
+        <emitter type="constant"/>
+    </scene>"#;
+
+    /// The integrators read each texture of a vertex's BSDF once, however
+    /// often they sample, evaluate and re-evaluate the BSDF there: with one
+    /// scattering vertex per path (every camera ray hits the plane), the
+    /// checkerboards are evaluated twice per path, in the primal and along
+    /// moving geometry (where `scatter` re-evaluates the BSDF).
+    #[test]
+    fn bsdf_textures_are_read_once_per_vertex() {
+        let integrators = [
+            r#"<integrator type="path"><integer name="max_depth" value="2"/></integrator>"#,
+            r#"<integrator type="direct">
+                <integer name="emitter_samples" value="3"/>
+                <integer name="bsdf_samples" value="3"/>
+            </integrator>"#,
+        ];
+        for integrator in integrators {
+            let xml = SCENE.replace("INTEGRATOR", integrator);
+            let scene = Scene::load_str(&xml, Path::new("test.xml"), &[]).unwrap();
+            let sensor = &scene.sensors[0];
+            let paths = 64;
+            // a geometry tangent: the paths move
+            let key = "plane.to_world";
+            let t = [1.0f32; 16];
+            let seeds = Seeds::tangents(&scene.params, &[(key, &t)]).unwrap();
+            for geometry_moves in [false, true] {
+                let before = CHECKERBOARD_EVALS.with(|n| n.get());
+                for k in 0..paths {
+                    let cs = CameraSample {
+                        sensor,
+                        film: Vec2::new((k % 8) as f32 + 0.5, (k / 8) as f32 + 0.5) / 8.0,
+                        lens: Vec2::ZERO,
+                    };
+                    let mut rng = sensor.sampler.stream(1, k, 0, 1);
+                    if geometry_moves {
+                        let store = scene.params.view(&seeds);
+                        assert!(store.moves_geometry());
+                        scene
+                            .integrator
+                            .radiance::<Dual>(&scene, &store, &cs, &mut rng);
+                    } else {
+                        scene.integrator.radiance::<f32>(
+                            &scene,
+                            &scene.params.primal(),
+                            &cs,
+                            &mut rng,
+                        );
+                    }
+                }
+                let evals = CHECKERBOARD_EVALS.with(|n| n.get()) - before;
+                assert_eq!(
+                    evals,
+                    2 * paths as usize,
+                    "{integrator}, geometry moves: {geometry_moves}"
+                );
+            }
+        }
+    }
 }

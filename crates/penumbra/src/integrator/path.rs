@@ -4,7 +4,7 @@
 
 use super::{mis_weight, scatter};
 use crate::ad::Real;
-use crate::bsdf::{BsdfFlags, BsdfT};
+use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
@@ -63,6 +63,9 @@ impl PathIntegrator {
         let mut hit = scene.intersect(&ray);
         let mut vertex = hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h));
         let mut depth = 0u32;
+        // the BSDF at the current vertex, its textures read once for all
+        // its uses there; set in place at each vertex
+        let mut bsdf_ctx = BsdfContext::empty();
         loop {
             let (Some(h), Some(si)) = (hit, vertex) else {
                 // escaped: environment emission
@@ -108,18 +111,19 @@ impl PathIntegrator {
                 return result;
             }
             let bsdf = scene.shape_bsdf(h.shape);
+            bsdf_ctx.set(bsdf, store, &si);
 
             // next-event estimation
             let u_light = rng.next_2d();
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
                 if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u_light) {
                     let wo = si.to_local(es.d);
-                    let f = bsdf.eval(store, &si, wo);
+                    let f = bsdf_ctx.eval(wo);
                     if !f.is_zero() {
                         let w = if es.ds.delta {
                             1.0
                         } else {
-                            mis_weight(es.ds.pdf, bsdf.pdf(store, &si, wo.val()))
+                            mis_weight(es.ds.pdf, bsdf_ctx.pdf(wo.val()))
                         };
                         result += throughput.mul_elem(f).mul_elem(es.weight) * R::cst(w);
                     }
@@ -129,10 +133,10 @@ impl PathIntegrator {
             // continue the path by BSDF sampling
             let u1 = rng.next_1d();
             let u2 = rng.next_2d();
-            let Some(bs) = bsdf.sample::<R>(store, &si, u1, u2) else {
+            let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 return result;
             };
-            let bounce = scatter(scene, store, bsdf, &si, &bs);
+            let bounce = scatter(scene, store, &bsdf_ctx, &si, &bs);
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;

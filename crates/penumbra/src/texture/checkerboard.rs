@@ -17,6 +17,13 @@ use crate::scene::{LoadContext, Node};
 /// Mitsuba; set to `false` for the consistent definition.
 pub const MITSUBA_EVAL1_SWAPS_COLORS: bool = true;
 
+#[cfg(test)]
+thread_local! {
+    /// Checkerboard evaluations on this thread: tests count the texture
+    /// reads of code that uses checkerboards.
+    pub(crate) static EVALS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// `color0` where the fractional parts of u and v are both ≤ ½ or both
 /// > ½, `color1` elsewhere (uv after `to_uv`), as Mitsuba 3 defines it.
 #[derive(Clone, Debug)]
@@ -53,6 +60,8 @@ impl Checkerboard {
 
 impl TextureT for Checkerboard {
     fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        #[cfg(test)]
+        EVALS.with(|n| n.set(n.get() + 1));
         if self.is_color0(store, si) {
             self.color0.eval(store, si)
         } else {
@@ -60,6 +69,8 @@ impl TextureT for Checkerboard {
         }
     }
     fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+        #[cfg(test)]
+        EVALS.with(|n| n.set(n.get() + 1));
         if self.is_color0(store, si) != MITSUBA_EVAL1_SWAPS_COLORS {
             self.color0.eval_1(store, si)
         } else {

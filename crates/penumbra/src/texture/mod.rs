@@ -7,6 +7,8 @@ mod checkerboard;
 mod uniform;
 
 pub use bitmap::{Bitmap, FilterType, WrapMode};
+#[cfg(test)]
+pub(crate) use checkerboard::EVALS as CHECKERBOARD_EVALS;
 pub use checkerboard::{Checkerboard, MITSUBA_EVAL1_SWAPS_COLORS};
 pub use uniform::Uniform;
 
