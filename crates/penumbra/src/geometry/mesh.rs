@@ -29,10 +29,12 @@
 //! Vertices are never renumbered: `vertex_positions` keeps the file's
 //! vertex order and count. Edges shared by more than two faces
 //! (non-manifold) are rendered as they are, with a warning: nothing in the
-//! renderer relies on manifoldness (there is no edge table yet).
+//! renderer relies on manifoldness (the edge table treats such an edge as
+//! one junction, see [`crate::geometry::edges`]).
 
 use crate::ad::Real;
 use crate::error::{Error, Result};
+use crate::geometry::edges::EdgeTable;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore};
@@ -104,6 +106,8 @@ pub struct Mesh {
     /// for a degenerate face), derived from the positions with the area
     /// table (f32, not differentiated: used by position sampling).
     face_n: Vec<Vec3>,
+    /// The welded edges and their kinds, refreshed with the areas.
+    pub edges: EdgeTable,
 }
 
 impl Mesh {
@@ -278,6 +282,7 @@ impl Mesh {
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
             face_n: Vec::new(),
+            edges: EdgeTable::default(),
         };
         mesh.update_areas(store)?;
         Ok(mesh)
@@ -340,6 +345,9 @@ impl Mesh {
             ))
         })?;
         self.area = self.area_distr.sum() as f32;
+        let normals = self.normals.map(|id| store.data(id));
+        self.edges
+            .refresh(&self.faces, store.data(self.positions), normals);
         Ok(())
     }
 
@@ -439,7 +447,11 @@ impl Mesh {
 
     /// The vertex indices and positions (in `R`) of triangle `prim`.
     #[inline(always)]
-    fn triangle_r<R: Real>(&self, store: &ParamStore, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
+    pub(crate) fn triangle_r<R: Real>(
+        &self,
+        store: &ParamStore,
+        prim: u32,
+    ) -> ([usize; 3], [V3<R>; 3]) {
         let [i0, i1, i2] = self.faces[prim as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
         let ps = idx.map(|i| store.read3(self.positions, i));
