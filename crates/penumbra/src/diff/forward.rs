@@ -1,9 +1,11 @@
 //! Forward-mode differentiation: the integrators run on dual numbers whose
 //! tangent is seeded from the parameter store (`Dual::from_param`), so the
 //! derivative image along a tangent direction costs one extra pass of the
-//! same code (like Mitsuba's `render_forward`).
+//! same code (like Mitsuba's `render_forward`). When geometry or the
+//! camera moves, the boundary term of primary visibility is added
+//! (`primary_boundary.rs`, its own budget `RenderOptions::sppp`).
 
-use super::warn_missing_boundary_terms;
+use super::{primary_boundary, warn_missing_boundary_terms};
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
@@ -11,20 +13,30 @@ use crate::scene::Scene;
 
 /// The derivative image dI/dθ·t along the tangent `t` given per parameter
 /// key (each slice as long as the parameter). Parameters not listed have
-/// zero tangent. Uses the same random numbers as [`crate::integrator::render`]
-/// with the same options, so it is the derivative of that very estimate.
+/// zero tangent. The interior term uses the same random numbers as
+/// [`crate::integrator::render`] with the same options, so it is the
+/// derivative of that very estimate with its film samples held fixed; the
+/// boundary term of primary visibility, added when the tangent moves
+/// geometry or a pinhole or orthographic camera, is estimated by samples of
+/// its own on the edges.
 pub fn render_forward(
     scene: &mut Scene,
     tangents: &[(&str, &[f32])],
     opts: &RenderOptions,
 ) -> Result<Rendered> {
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    let geometry_moves = warn_missing_boundary_terms(scene, &keys)?;
+    let primary = primary_boundary::applies(scene, opts)?;
+    let geometry_moves = warn_missing_boundary_terms(scene, &keys, primary)?;
     scene.params.clear_tangents();
     for (key, t) in tangents {
         scene.params.set_tangent(key, t)?;
     }
-    let result = derivative_image(scene, opts, geometry_moves);
+    let result = derivative_image(scene, opts, geometry_moves).and_then(|mut image| {
+        if geometry_moves && primary {
+            primary_boundary::add_primary_boundary(scene, opts, &mut image)?;
+        }
+        Ok(image)
+    });
     scene.params.clear_tangents();
     result
 }

@@ -121,7 +121,7 @@ pub fn render_backward(
     let mut geometry_moves = false;
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            geometry_moves = warn_missing_boundary_terms(scene, keys)?;
+            geometry_moves = warn_missing_boundary_terms(scene, keys, false)?;
             keys.iter()
                 .map(|k| {
                     let id = scene.params.require(k)?;
