@@ -210,7 +210,7 @@ fn compare_with_finite_differences(
             .collect()
     };
     let (mut fwd, mut fd) = (Vec::new(), Vec::new());
-    let mut set = |scene: &mut Scene, s: f32| {
+    let set = |scene: &mut Scene, s: f32| {
         let v: Vec<f32> = base.iter().zip(&t).map(|(b, t)| b + s * t).collect();
         scene.params.set(key, &v).unwrap();
         scene.update().unwrap();

@@ -106,8 +106,9 @@ pub struct Mesh {
     /// for a degenerate face), derived from the positions with the area
     /// table (f32, not differentiated: used by position sampling).
     face_n: Vec<Vec3>,
-    /// The welded edges and their kinds, refreshed with the areas.
-    pub edges: EdgeTable,
+    /// The welded edges and their kinds, refreshed with the areas (boxed:
+    /// the shape enum stays small).
+    pub edges: Box<EdgeTable>,
 }
 
 impl Mesh {
@@ -282,7 +283,7 @@ impl Mesh {
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
             face_n: Vec::new(),
-            edges: EdgeTable::default(),
+            edges: Box::default(),
         };
         mesh.update_areas(store)?;
         Ok(mesh)
