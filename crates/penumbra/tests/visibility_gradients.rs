@@ -210,9 +210,21 @@ fn compare_with_finite_differences(
             .collect()
     };
     let (mut fwd, mut fd) = (Vec::new(), Vec::new());
+    // a mesh's vertex normals are recomputed from moved positions unless
+    // they are set in the same update (as in Mitsuba): keep them, they are
+    // right for a translation
+    let normals_key = key.replace("vertex_positions", "vertex_normals");
+    let normals = scene
+        .params
+        .id(&normals_key)
+        .filter(|_| normals_key != key)
+        .map(|id| scene.params.data(id).to_vec());
     let set = |scene: &mut Scene, s: f32| {
         let v: Vec<f32> = base.iter().zip(&t).map(|(b, t)| b + s * t).collect();
         scene.params.set(key, &v).unwrap();
+        if let Some(n) = &normals {
+            scene.params.set(&normals_key, n).unwrap();
+        }
         scene.update().unwrap();
     };
     for b in 0..BATCHES {
@@ -397,6 +409,114 @@ fn flat_shaded_cube_translation_matches_finite_differences() {
         0.01,
         (1, 16),
     );
+}
+
+/// The welded icosphere of `scenes/meshes` under a directional light over
+/// black, flat-shaded (`face_normals`), translated: its outline and every
+/// edge between two visible faces carry a jump (a convex polyhedron does
+/// not shadow itself, so no shadow edge moves).
+#[test]
+fn flat_shaded_sphere_translation_matches_finite_differences() {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-1, -2, -3"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="ply" id="ball">
+                <string name="filename" value="meshes/icosphere3.ply"/>
+                <boolean name="face_normals" value="true"/>
+                <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4)
+    );
+    let key = "ball.vertex_positions";
+    compare_with_finite_differences(
+        "flat-shaded sphere moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// A smooth-shaded closed mesh: an octahedron whose vertex normals all
+/// face the camera (so shading is uniform and never cut off by the view
+/// direction), lit by a directional light from near the camera (every face
+/// seen faces the light: no face shadows a neighbour), over black. Its
+/// edges are all smooth; only the four around its equator are silhouettes
+/// from the camera, and they alone carry the boundary term.
+#[test]
+fn smooth_octahedron_silhouette_matches_finite_differences() {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-octahedron.obj",
+        std::process::id()
+    ));
+    let mut obj = String::new();
+    for v in [
+        [1.0, 0.1, 0.0],
+        [-0.1, 1.0, 0.0],
+        [-1.0, -0.1, 0.0],
+        [0.1, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ] {
+        obj += &format!("v {} {} {}\nvn 0 0 1\n", v[0], v[1], v[2]);
+    }
+    for f in [
+        [1, 2, 5],
+        [2, 3, 5],
+        [3, 4, 5],
+        [4, 1, 5],
+        [2, 1, 6],
+        [3, 2, 6],
+        [4, 3, 6],
+        [1, 4, 6],
+    ] {
+        obj += &format!("f {0}//{0} {1}//{1} {2}//{2}\n", f[0], f[1], f[2]);
+    }
+    std::fs::write(&path, obj).unwrap();
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-0.1, -0.2, -1"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="obj" id="octa">
+                <string name="filename" value="{}"/>
+                <transform name="to_world"><rotate x="1" angle="20"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4),
+        path.display()
+    );
+    let scene = load(&xml);
+    let mesh = scene.shapes[0].as_mesh().unwrap();
+    assert_eq!(mesh.edges.counts(), [0, 0, 12, 0, 0], "all edges smooth");
+    let key = "octa.vertex_positions";
+    compare_with_finite_differences(
+        "smooth octahedron moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+    let _ = std::fs::remove_file(&path);
 }
 
 /// The warning no longer names primary visibility when its term is

@@ -61,7 +61,14 @@
 //! aperture), the silhouettes of analytic shapes (spheres, disks), edges
 //! cut by the near plane (the cut itself is a moving edge of the image),
 //! and coincident edges of distinct meshes (each is counted). Callers warn
-//! about the first two ([`super::warn_missing_boundary_terms`]).
+//! about the first two ([`super::warn_missing_boundary_terms`]). Two jumps
+//! of smooth-shaded meshes that do not lie on silhouettes are not sampled
+//! either: where the view direction crosses the horizon of the
+//! interpolated shading normal (BSDFs and area emitters are zero below it;
+//! near the silhouettes of a coarse mesh this is a curve inside the faces),
+//! and a smooth edge between a face that sees a light and a neighbour that
+//! shadows itself from it (a shadow edge seen directly, for the shadow
+//! estimator to come).
 
 use crate::ad::{Dual, Real};
 use crate::error::{Error, Result};
