@@ -63,6 +63,15 @@ fn sensor(size: u32, spp: u32) -> String {
     )
 }
 
+/// The camera of [`sensor`] made orthographic, its view window scaled to
+/// [-1.6, 1.6]² in the world.
+fn orthographic_sensor(size: u32, spp: u32) -> String {
+    sensor(size, spp)
+        .replace(r#"type="perspective""#, r#"type="orthographic""#)
+        .replace(r#"<float name="fov" value="40"/>"#, "")
+        .replace("<lookat", r#"<scale x="1.6" y="1.6"/><lookat"#)
+}
+
 fn opts(seed: u64, spp: u32, sppp: u32) -> RenderOptions {
     RenderOptions {
         spp: Some(spp),
@@ -323,13 +332,17 @@ fn compare_with_finite_differences(
 /// background), lit by it: with BSDF sampling only, both sides of every
 /// edge have a constant radiance (0.2 and 1).
 fn rectangle_scene(size: u32) -> String {
+    rectangle_scene_with(&sensor(size, 4))
+}
+
+fn rectangle_scene_with(sensor: &str) -> String {
     format!(
         r#"<scene version="3.0.0">
             <integrator type="direct">
                 <integer name="emitter_samples" value="0"/>
                 <integer name="bsdf_samples" value="1"/>
             </integrator>
-            {}
+            {sensor}
             <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
             <shape type="rectangle" id="rect">
                 <transform name="to_world">
@@ -340,8 +353,7 @@ fn rectangle_scene(size: u32) -> String {
                 </transform>
                 <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.2, 0.2"/></bsdf>
             </shape>
-        </scene>"#,
-        sensor(size, 4)
+        </scene>"#
     )
 }
 
@@ -366,6 +378,43 @@ fn camera_translation_matches_finite_differences() {
     compare_with_finite_differences(
         "camera moved",
         &rectangle_scene(32),
+        key,
+        |s| translation_tangent(s, key, [0.5, -1.0, 0.2]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (b) The field of view widened: every edge moves towards the centre.
+#[test]
+fn field_of_view_matches_finite_differences() {
+    compare_with_finite_differences(
+        "fov widened",
+        &rectangle_scene(32),
+        "camera.x_fov",
+        |_| vec![1.0],
+        0.3,
+        (1, 16),
+    );
+}
+
+/// (b) An orthographic camera: the rectangle translated, then the camera.
+#[test]
+fn orthographic_camera_matches_finite_differences() {
+    let xml = rectangle_scene_with(&orthographic_sensor(32, 4));
+    let key = "rect.vertex_positions";
+    compare_with_finite_differences(
+        "rectangle moved (orthographic)",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+    let key = "camera.to_world";
+    compare_with_finite_differences(
+        "orthographic camera moved",
+        &xml,
         key,
         |s| translation_tangent(s, key, [0.5, -1.0, 0.2]).unwrap(),
         0.01,
