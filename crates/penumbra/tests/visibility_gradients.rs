@@ -385,6 +385,26 @@ fn camera_translation_matches_finite_differences() {
     );
 }
 
+/// (b) The rectangle translated, seen through Mitsuba's default Gaussian
+/// filter with the film border sampled: the boundary term is splatted
+/// through the filter and normalised by each pixel's filter weight.
+#[test]
+fn gaussian_filter_matches_finite_differences() {
+    let sensor = sensor(32, 4).replace(
+        r#"<rfilter type="box"/>"#,
+        r#"<rfilter type="gaussian"/><boolean name="sample_border" value="true"/>"#,
+    );
+    let key = "rect.vertex_positions";
+    compare_with_finite_differences(
+        "rectangle moved (gaussian filter)",
+        &rectangle_scene_with(&sensor),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
 /// (b) The field of view widened: every edge moves towards the centre.
 #[test]
 fn field_of_view_matches_finite_differences() {

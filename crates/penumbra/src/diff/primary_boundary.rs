@@ -488,3 +488,47 @@ impl Context<'_> {
         (out, non_finite)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn filter_integrals() {
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+        let bx = ReconstructionFilter::Box;
+        assert!(close(filter_integral(&bx, -10.0, 10.0), 1.0));
+        assert!(close(filter_integral(&bx, 0.0, 10.0), 0.5));
+        assert!(close(filter_integral(&bx, -0.2, 0.1), 0.3));
+        let tent = ReconstructionFilter::Tent { radius: 1.0 };
+        assert!(close(filter_integral(&tent, -5.0, 5.0), 1.0));
+        assert!(close(filter_integral(&tent, 0.5, 5.0), 0.125));
+        let g = ReconstructionFilter::Gaussian {
+            stddev: 0.5,
+            radius: 2.0,
+        };
+        // a fine midpoint sum
+        let n = 200_000;
+        let sum: f64 = (0..n)
+            .map(|i| g.eval(-0.7 + 2.0 * (i as f32 + 0.5) / n as f32) as f64)
+            .sum::<f64>()
+            * 2.0
+            / n as f64;
+        assert!((filter_integral(&g, -0.7, 1.3) - sum).abs() < 1e-5);
+    }
+
+    #[test]
+    fn clipping_to_the_film() {
+        let r = Region {
+            lo: Vec2::ZERO,
+            hi: Vec2::new(10.0, 5.0),
+        };
+        let (a, b) = (Vec2::new(-5.0, 1.0), Vec2::new(15.0, 1.0));
+        assert_eq!(clip(a, b, r), Some((0.25, 0.75)));
+        assert_eq!(clip(Vec2::new(1.0, 6.0), Vec2::new(9.0, 7.0), r), None);
+        assert_eq!(
+            clip(Vec2::new(1.0, 1.0), Vec2::new(2.0, 2.0), r),
+            Some((0.0, 1.0))
+        );
+    }
+}
