@@ -588,6 +588,47 @@ fn smooth_octahedron_silhouette_matches_finite_differences() {
     let _ = std::fs::remove_file(&path);
 }
 
+/// Flipped, degenerate (collinear, two corners at one position) and
+/// intersecting triangles: the derivative image stays finite, along
+/// translations and random perturbations of every vertex.
+#[test]
+fn degenerate_and_intersecting_triangles_give_finite_derivatives() {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-degenerate.obj",
+        std::process::id()
+    ));
+    let obj = "\
+        v -1.5 -1 0\nv -0.5 -1 0\nv -1 0 0\n\
+        v 0.5 -1 0\nv 1 0 0\nv 1.5 -1 0\n\
+        v -1 0.5 0\nv 0 0.5 0\nv 1 0.5 0\n\
+        v -1 1 0\nv -1 1 0\nv 0 1.5 0\n\
+        v -0.5 -0.5 -0.5\nv 0.5 0.5 0.5\nv 0.5 -0.5 0.2\n\
+        v -0.5 0.5 0.5\nv 0.5 -0.5 -0.5\nv -0.3 -0.6 0.1\n\
+        f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\nf 13 14 15\nf 16 17 18\n";
+    std::fs::write(&path, obj).unwrap();
+    let xml = rectangle_scene(24).replace(
+        r#"<shape type="rectangle" id="rect">"#,
+        &format!(
+            r#"<shape type="obj" id="bad"><string name="filename" value="{}"/></shape>
+            <shape type="rectangle" id="rect">"#,
+            path.display()
+        ),
+    );
+    let mut scene = load(&xml);
+    let _ = std::fs::remove_file(&path);
+    let key = "bad.vertex_positions";
+    let tangents = [
+        translation_tangent(&scene, key, [1.0, 0.3, -0.2]).unwrap(),
+        penumbra::diff::perturbation_tangent(&scene, key, 7).unwrap(),
+    ];
+    for t in tangents {
+        let d = render_forward(&mut scene, &[(key, &t)], &opts(3, 2, 8)).unwrap();
+        assert!(d.data.iter().all(|v| v.is_finite()));
+        assert_eq!(d.non_finite_samples, 0);
+        assert!(d.data.iter().any(|&v| v != 0.0));
+    }
+}
+
 /// The warning no longer names primary visibility when its term is
 /// estimated (forward mode, meshes); it still names shadows and indirect
 /// visibility, and reverse mode still names primary visibility.

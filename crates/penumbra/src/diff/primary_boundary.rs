@@ -381,6 +381,7 @@ pub(crate) fn add_primary_boundary(
             }
         }
     }
+    image.non_finite_samples += non_finite;
     if non_finite > 0 {
         crate::warn(format!(
             "primary visibility boundary term: {non_finite} edge sample(s) had a NaN or infinite \
