@@ -517,6 +517,43 @@ fn flat_shaded_sphere_translation_matches_finite_differences() {
     );
 }
 
+/// The welded icosphere smooth-shaded with its exact sphere normals, lit
+/// from near the camera (no face shadows a neighbour): its silhouette is
+/// lined by a thin sliver where the view crosses the shading normals'
+/// horizon, whose border moves too; the estimator merges it into the
+/// silhouette's jump (see `diff/primary_boundary.rs`).
+#[test]
+fn smooth_sphere_silhouette_matches_finite_differences() {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-0.3, -0.4, -1"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="ply" id="ball">
+                <string name="filename" value="meshes/icosphere3.ply"/>
+                <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4)
+    );
+    let key = "ball.vertex_positions";
+    compare_with_finite_differences(
+        "smooth sphere moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
 /// A smooth-shaded closed mesh: an octahedron whose vertex normals all
 /// face the camera (so shading is uniform and never cut off by the view
 /// direction), lit by a directional light from near the camera (every face

@@ -45,7 +45,8 @@
 //!   anything nearer than the edge;
 //! - the jump is the primal radiance of the integrator at `x ∓ εn`, both
 //!   sides with the same random numbers (their difference then has no
-//!   noise where the two paths agree);
+//!   noise where the two paths agree; on smooth-shaded meshes, beyond a
+//!   thin shading-horizon sliver, see below);
 //! - the normal velocity is `⟨dx/dθ, n⟩` with `x(θ)` the point at a fixed
 //!   fraction between the moving projected end points (any point of the
 //!   projected line gives the same normal component).
@@ -62,18 +63,20 @@
 //! cut by the near plane (the cut itself is a moving edge of the image),
 //! and coincident edges of distinct meshes (each is counted). Callers warn
 //! about the first two ([`super::warn_missing_boundary_terms`]). Two jumps
-//! of smooth-shaded meshes that do not lie on silhouettes are not sampled
-//! either: where the view direction crosses the horizon of the
+//! of smooth-shaded meshes off the edge table are handled only in part:
+//! the curve where the view direction crosses the horizon of the
 //! interpolated shading normal (BSDFs and area emitters are zero below it;
-//! near the silhouettes of a coarse mesh this is a curve inside the faces),
-//! and a smooth edge between a face that sees a light and a neighbour that
-//! shadows itself from it (a shadow edge seen directly, for the shadow
-//! estimator to come).
+//! near the silhouettes of a coarse mesh it lines them inside the faces) is
+//! merged into the silhouette when it is thinner than a pixel
+//! ([`Context::beyond_horizon`]) and missing otherwise; a smooth edge
+//! between a face that sees a light and a neighbour that shadows itself
+//! from it (a shadow edge seen directly) is left to the shadow estimator
+//! to come.
 
 use crate::ad::{Dual, Real};
 use crate::error::{Error, Result};
 use crate::geometry::edges::{EdgeKind, EdgeTable};
-use crate::geometry::Shape;
+use crate::geometry::{DiffRay, Shape};
 use crate::image::{ImageBlock, ReconstructionFilter};
 use crate::integrator::{RenderOptions, Rendered};
 use crate::math::{DiscreteDistribution, V3};
@@ -113,6 +116,10 @@ struct Segment {
     /// The world-space end points (near-clipped), for the visibility test.
     p0: Vec3,
     p1: Vec3,
+    /// The shape of the edge, if it is smooth-shaded (vertex normals): its
+    /// silhouettes may be lined with a shading-horizon sliver (see
+    /// [`Context::beyond_horizon`]).
+    smooth_shape: Option<u32>,
 }
 
 impl Segment {
@@ -141,10 +148,11 @@ fn segments(
     let eye = proj.eye();
     let near = proj.near * (1.0 + 1e-4);
     let mut out = Vec::new();
-    for shape in &scene.shapes {
+    for (shape_index, shape) in scene.shapes.iter().enumerate() {
         let Shape::Mesh(mesh) = shape else {
             continue;
         };
+        let smooth_shape = mesh.normals.map(|_| shape_index as u32);
         let positions = store.data(mesh.positions);
         for e in &mesh.edges.edges {
             match e.kind {
@@ -197,6 +205,7 @@ fn segments(
                 s1,
                 p0: lerp(w0, w1, t0),
                 p1: lerp(w1, w0, t1),
+                smooth_shape,
             };
             let len = seg.length();
             if len > 0.0 && len.is_finite() && da.is_finite() && db.is_finite() {
@@ -419,6 +428,46 @@ struct Context<'a> {
 }
 
 impl Context<'_> {
+    /// The film position `eps` from `x` towards `dir` (a unit vector) or,
+    /// if the camera sees there the back of the shading normals of the
+    /// smooth-shaded `shape` through its front faces, the first position
+    /// beyond that sliver (offsets growing 4× up to a pixel).
+    ///
+    /// Why: where a coarse smooth-shaded mesh turns away from the camera,
+    /// the interpolated shading normal faces away before the geometry does,
+    /// and BSDFs and emitters are zero below the shading horizon, so a thin
+    /// black sliver lines the silhouette inside the faces. Its inner
+    /// border (the horizon curve) is a discontinuity too, which the edge
+    /// table does not hold. For a sliver thinner than the filter it moves
+    /// with the silhouette, and the two jumps add up to the jump from the
+    /// outside to the surface beyond the sliver, which is what this
+    /// measures across the silhouette. A sliver wider than a pixel is left
+    /// as it is (its horizon term is then missing).
+    fn beyond_horizon(&self, x: Vec2, dir: Vec2, smooth_shape: Option<u32>) -> Vec2 {
+        let mut off = self.eps;
+        let Some(shape) = smooth_shape else {
+            return x + dir * off;
+        };
+        let scene = self.scene;
+        loop {
+            let xs = x + dir * off;
+            if off >= 1.0 {
+                return xs;
+            }
+            let ray = self.camera_sample(xs).ray::<f32>(&scene.params).val();
+            let in_sliver = scene.intersect(&ray).is_some_and(|hit| {
+                hit.shape == shape && {
+                    let si = scene.surface_interaction::<f32>(&DiffRay::cst(&ray), &hit);
+                    si.n.val().dot(ray.d) < 0.0 && !(si.wi.z > 0.0)
+                }
+            });
+            if !in_sliver {
+                return xs;
+            }
+            off = (off * 4.0).min(1.0);
+        }
+    }
+
     fn camera_sample(&self, x: Vec2) -> CameraSample<'_> {
         CameraSample {
             sensor: self.sensor,
@@ -466,7 +515,7 @@ impl Context<'_> {
                 }
             }
             let radiance = |side: f32| {
-                let cs = self.camera_sample(x + n * (side * self.eps));
+                let cs = self.camera_sample(self.beyond_horizon(x, n * side, seg.smooth_shape));
                 let mut r = rng.clone();
                 scene
                     .integrator
