@@ -13,15 +13,19 @@ port by changing the import::
     grads = pn.render_backward(scene, d_loss_d_image)     # {key: array}
 
 ``render_forward`` uses the same random numbers as ``render`` with the
-same ``spp``/``seed``: it is the exact derivative of that estimate.
+same ``spp``/``seed``: its interior term is the exact derivative of that
+estimate.
 ``render_backward`` replays paths with ``seed_grad``, by default
 ``gradient_seed(seed)``, decorrelated from the image's samples (as
 Mitsuba's ``seed_grad``): the same samples would bias the gradient of a
 non-linear loss. Pass ``seed_grad=seed`` for the exact derivative of the
 image rendered with ``seed``.
 Geometry parameters (flagged discontinuous) get the interior term of
-their derivative only, with a warning: the boundary terms of silhouettes
-and shadows are not estimated yet. :class:`Pose` maps a latent
+their derivative and, in ``render_forward`` for meshes seen by a pinhole
+or orthographic camera, the boundary term of primary visibility (edges
+seen directly, estimated with edge samples of their own); the boundary
+terms of shadows (and, in ``render_backward``, of silhouettes) are not
+estimated yet, with a warning that names them. :class:`Pose` maps a latent
 translation and rotation onto vertex positions or a ``to_world``.
 """
 

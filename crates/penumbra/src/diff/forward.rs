@@ -1,9 +1,11 @@
 //! Forward-mode differentiation: the integrators run on dual numbers whose
 //! tangent is seeded from the parameter store (`Dual::from_param`), so the
 //! derivative image along a tangent direction costs one extra pass of the
-//! same code (like Mitsuba's `render_forward`).
+//! same code (like Mitsuba's `render_forward`). When geometry or the
+//! camera moves, the boundary term of primary visibility is added
+//! (`primary_boundary.rs`, its own budget `RenderOptions::sppp`).
 
-use super::warn_missing_boundary_terms;
+use super::{primary_boundary, warn_missing_boundary_terms};
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
@@ -12,9 +14,12 @@ use crate::scene::Scene;
 
 /// The derivative image dI/dθ·t along the tangent `t` given per parameter
 /// key (each slice as long as the parameter). Parameters not listed have
-/// zero tangent. Uses the same random numbers as [`crate::integrator::render`]
-/// with the same options, so it is the derivative of that very estimate.
-/// The tangents live in this call, not in the scene.
+/// zero tangent. The interior term uses the same random numbers as
+/// [`crate::integrator::render`] with the same options, so it is the
+/// derivative of that very estimate with its film samples held fixed; the
+/// boundary term of primary visibility, added when the tangent moves
+/// geometry or a pinhole or orthographic camera, is estimated by samples of
+/// its own on the edges. The tangents live in this call, not in the scene.
 pub fn render_forward(
     scene: &Scene,
     tangents: &[(&str, &[f32])],
@@ -22,8 +27,14 @@ pub fn render_forward(
 ) -> Result<Rendered> {
     let seeds = Seeds::tangents(&scene.params, tangents)?;
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    warn_missing_boundary_terms(scene, &keys)?;
-    derivative_image(scene, &scene.params.view(&seeds), opts)
+    let primary = primary_boundary::applies(scene, opts)?;
+    let edges_move = warn_missing_boundary_terms(scene, &keys, primary)?;
+    let store = scene.params.view(&seeds);
+    let mut image = derivative_image(scene, &store, opts)?;
+    if edges_move && primary {
+        primary_boundary::add_primary_boundary(scene, &store, opts, &mut image)?;
+    }
+    Ok(image)
 }
 
 fn derivative_image(scene: &Scene, store: &ParamView, opts: &RenderOptions) -> Result<Rendered> {

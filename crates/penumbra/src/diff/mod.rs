@@ -1,11 +1,14 @@
 //! Derivative estimators: forward (tangent) mode, path-replay reverse mode,
-//! and (to come) boundary terms (docs/architecture.md §4). Forward mode
-//! gives a derivative image for a tangent over the parameters; reverse mode
-//! gives gradients for every differentiable parameter.
+//! and boundary terms (docs/architecture.md §4): forward mode adds the
+//! boundary term of primary visibility ([`primary_boundary`]); those of
+//! shadows and indirect visibility are to come. Forward mode gives a
+//! derivative image for a tangent over the parameters; reverse mode gives
+//! gradients for every differentiable parameter.
 
 mod check;
 mod forward;
 mod prb;
+mod primary_boundary;
 
 pub use check::{
     check_gradient, perturbation_tangent, translation_tangent, CheckOptions, CheckReport, Estimate,
@@ -32,32 +35,73 @@ pub fn gradient_seed(seed: u64) -> u64 {
 
 /// Warns (once per call, naming the keys) when derivatives are requested
 /// for parameters that move visibility discontinuities (vertex positions,
-/// transforms, the camera): the integrators estimate the interior term of
-/// their derivative only; the boundary terms of primary visibility
-/// (silhouettes) and of shadows are not estimated yet, so the result is
-/// biased wherever such an edge moves. Not an error: the interior term is
-/// exact in scenes where no edge moves, and is what users optimise with
-/// today; never silent.
-pub(crate) fn warn_missing_boundary_terms(scene: &Scene, keys: &[&str]) -> Result<()> {
+/// transforms, the camera), naming the boundary terms that the pass does
+/// not estimate, so that the result is biased wherever such an edge
+/// moves. Not an error: the other terms are right, and what users optimise
+/// with today; never silent.
+///
+/// `primary`: the pass adds the boundary term of primary visibility at
+/// mesh edges ([`primary_boundary`]). It is complete only if no analytic
+/// shape (sphere, disk) has a silhouette that moves: one of the keys moves
+/// such a shape or the camera. The terms of shadows and of visibility
+/// seen after a bounce are never estimated yet.
+///
+/// Returns whether any of them moves a visibility edge (then the boundary
+/// terms apply).
+pub(crate) fn warn_missing_boundary_terms(
+    scene: &Scene,
+    keys: &[&str],
+    primary: bool,
+) -> Result<bool> {
     let mut moving = Vec::new();
+    let mut moving_ids = Vec::new();
     for key in keys {
         let id = scene.params.require(key)?;
         if scene.params.get(id).flags.discontinuous {
             moving.push(*key);
+            moving_ids.push(id);
         }
     }
-    if !moving.is_empty() {
-        crate::warn(missing_boundary_terms_message(&moving));
+    if moving.is_empty() {
+        return Ok(false);
     }
-    Ok(())
+    let camera_moves = moving.iter().any(|k| {
+        scene.sensors.iter().any(|s| {
+            k.strip_prefix(s.key.as_str())
+                .is_some_and(|r| r.starts_with('.'))
+        })
+    });
+    let analytic_silhouettes_move = scene.shapes.iter().any(|s| {
+        s.as_mesh().is_none()
+            && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
+    });
+    crate::warn(if primary && !analytic_silhouettes_move {
+        missing_indirect_boundary_terms_message(&moving)
+    } else {
+        missing_boundary_terms_message(&moving)
+    });
+    Ok(true)
 }
 
-/// The warning of [`warn_missing_boundary_terms`].
+/// The warning of [`warn_missing_boundary_terms`] when no boundary term
+/// is estimated (or the primary one only in part).
 pub fn missing_boundary_terms_message(keys: &[&str]) -> String {
     format!(
         "{} move(s) geometry or the camera: only the interior term of the derivative is \
          estimated; the boundary terms of primary visibility (silhouettes) and of shadows \
          are missing, so derivatives are biased where a silhouette or shadow edge moves",
+        keys.join(", ")
+    )
+}
+
+/// The warning of [`warn_missing_boundary_terms`] when the boundary term of
+/// primary visibility is estimated.
+pub fn missing_indirect_boundary_terms_message(keys: &[&str]) -> String {
+    format!(
+        "{} move(s) geometry or the camera: the interior term and the boundary term of \
+         primary visibility (edges seen directly by the camera) are estimated; the boundary \
+         terms of shadows and of edges seen after a bounce (indirect visibility) are missing, \
+         so derivatives are biased where a shadow edge or an edge seen indirectly moves",
         keys.join(", ")
     )
 }

@@ -122,7 +122,7 @@ pub fn render_backward(
     }
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            warn_missing_boundary_terms(scene, keys)?;
+            warn_missing_boundary_terms(scene, keys, false)?;
             keys.iter()
                 .map(|k| scene.params.require(k))
                 .collect::<std::result::Result<_, _>>()?

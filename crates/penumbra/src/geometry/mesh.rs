@@ -30,10 +30,12 @@
 //! Vertices are never renumbered: `vertex_positions` keeps the file's
 //! vertex order and count. Edges shared by more than two faces
 //! (non-manifold) are rendered as they are, with a warning: nothing in the
-//! renderer relies on manifoldness (there is no edge table yet).
+//! renderer relies on manifoldness (the edge table treats such an edge as
+//! one junction, see [`crate::geometry::edges`]).
 
 use crate::ad::Real;
 use crate::error::{Error, Result};
+use crate::geometry::edges::EdgeTable;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
@@ -105,6 +107,9 @@ pub struct Mesh {
     /// for a degenerate face), derived from the positions with the area
     /// table (f32, not differentiated: used by position sampling).
     face_n: Vec<Vec3>,
+    /// The welded edges and their kinds, refreshed with the areas (boxed:
+    /// the shape enum stays small).
+    pub edges: Box<EdgeTable>,
 }
 
 impl Mesh {
@@ -279,6 +284,7 @@ impl Mesh {
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
             face_n: Vec::new(),
+            edges: Box::default(),
         };
         mesh.update_areas(store)?;
         Ok(mesh)
@@ -341,6 +347,9 @@ impl Mesh {
             ))
         })?;
         self.area = self.area_distr.sum() as f32;
+        let normals = self.normals.map(|id| store.data(id));
+        self.edges
+            .refresh(&self.faces, store.data(self.positions), normals);
         Ok(())
     }
 
@@ -440,7 +449,11 @@ impl Mesh {
 
     /// The vertex indices and positions (in `R`) of triangle `prim`.
     #[inline(always)]
-    fn triangle_r<R: Real>(&self, store: &ParamView, prim: u32) -> ([usize; 3], [V3<R>; 3]) {
+    pub(crate) fn triangle_r<R: Real>(
+        &self,
+        store: &ParamView,
+        prim: u32,
+    ) -> ([usize; 3], [V3<R>; 3]) {
         let [i0, i1, i2] = self.faces[prim as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
         let ps = idx.map(|i| store.read3(self.positions, i));

@@ -5,6 +5,7 @@
 //! (vertex positions, centre, radius), so geometry derivatives can flow.
 
 pub mod accel;
+pub mod edges;
 mod interaction;
 pub mod mesh;
 pub mod obj;

@@ -24,6 +24,10 @@ pub type ProgressFn = dyn Fn(usize, usize) + Send + Sync;
 pub struct RenderOptions {
     /// Samples per pixel (default: the scene sampler's `sample_count`).
     pub spp: Option<u32>,
+    /// Derivative passes: edge samples per pixel of the boundary term of
+    /// primary visibility (Mitsuba's `sppp`: `sppp × pixels` samples on the
+    /// edges), default: `spp`; 0 turns the term off.
+    pub sppp: Option<u32>,
     /// Seed of all random numbers (combined with the sampler's own seed).
     pub seed: u64,
     /// Which of the scene's sensors to render (default: the first).

@@ -4,10 +4,12 @@
 
 mod orthographic;
 mod perspective;
+mod projection;
 mod thinlens;
 
 pub use orthographic::Orthographic;
 pub use perspective::Perspective;
+pub(crate) use projection::Projector;
 pub use thinlens::ThinLens;
 
 use crate::ad::Real;

@@ -1,0 +1,705 @@
+//! The boundary term of primary visibility (forward mode): derivatives of
+//! images whose silhouettes and sharp edges move, where the interior term
+//! alone is wrong (zero, in these scenes: every surface and the background
+//! have constant radiance, so the whole derivative is the boundary term).
+//!
+//! Tolerances come from the estimators' own noise: every quantity is
+//! estimated over `BATCHES` independent batches (different seeds), giving
+//! a mean and a standard error.
+//! - Against an analytic answer (a triangle's projected area): the mean
+//!   must be within 4 standard errors of it, plus a floor of 0.2 % of the
+//!   answer (the edge offset of the jump estimate and f32 rounding), and
+//!   the standard error must be below 1 % of the answer (so that the test
+//!   could fail).
+//! - Against finite differences of the rendered image (the same seeds at
+//!   θ ± h, 256 stratified samples per pixel), per pixel (channels
+//!   summed). The finite difference is exactly the derivative AVERAGED over
+//!   [θ − h, θ + h]; where an edge crosses a pixel corner within the step
+//!   (a nearly vertical edge's crossing with a pixel column slides fast
+//!   along it), that average differs from the derivative at θ by a large
+//!   part of the pixel's value. So the forward-mode side is averaged over
+//!   the same interval: the midpoint rule over `STEPS` parameter values,
+//!   each with its own seed. h moves the edges by about 0.1 pixel. Then
+//!   z_p = |fwd_p − fd_p| / √(σ²_fwd,p + σ²_fd,p + floor²), floor = 1 % of
+//!   the largest |fd_p|. Over the pixels where either is above the floor,
+//!   the mean of z_p² must be ≤ 2 (about 1.15 expected without the floor:
+//!   standard errors from 16 batches, a Student t with 15 degrees of
+//!   freedom), and at most 1 % of them may have z_p > 4. At least 50
+//!   pixels must have a finite difference above 4 of its standard errors
+//!   (the test sees edges), and the image sums must agree within 4
+//!   standard errors plus 1 %.
+//!
+//! The box filter makes each pixel the plain integral over its square.
+
+use penumbra::diff::{render_backward, render_forward, translation_tangent};
+use penumbra::integrator::{render, RenderOptions};
+use penumbra::scene::Scene;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+const BATCHES: u64 = 16;
+
+fn load(xml: &str) -> Scene {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/inline-test.xml");
+    Scene::load_str(xml, &path, &[]).unwrap_or_else(|e| panic!("{e}\n{xml}"))
+}
+
+/// A pinhole camera `camera` at (0, 0, 5) looking at the origin (+y up),
+/// fov 40°, a square `size`² film with a box filter, a stratified sampler.
+fn sensor(size: u32, spp: u32) -> String {
+    format!(
+        r#"<sensor type="perspective" id="camera">
+            <float name="fov" value="40"/>
+            <transform name="to_world">
+                <lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>
+            </transform>
+            <film type="hdrfilm">
+                <integer name="width" value="{size}"/>
+                <integer name="height" value="{size}"/>
+                <rfilter type="box"/>
+            </film>
+            <sampler type="stratified"><integer name="sample_count" value="{spp}"/></sampler>
+        </sensor>"#
+    )
+}
+
+/// The camera of [`sensor`] made orthographic, its view window scaled to
+/// [-1.6, 1.6]² in the world.
+fn orthographic_sensor(size: u32, spp: u32) -> String {
+    sensor(size, spp)
+        .replace(r#"type="perspective""#, r#"type="orthographic""#)
+        .replace(r#"<float name="fov" value="40"/>"#, "")
+        .replace("<lookat", r#"<scale x="1.6" y="1.6"/><lookat"#)
+}
+
+fn opts(seed: u64, spp: u32, sppp: u32) -> RenderOptions {
+    RenderOptions {
+        spp: Some(spp),
+        sppp: Some(sppp),
+        seed,
+        ..Default::default()
+    }
+}
+
+/// Mean and standard error.
+fn stats(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
+/// A world point's film position (pixels) in the camera of [`sensor`]:
+/// looking down −z from z = 5, film x towards world +x, film y down.
+fn project(p: [f64; 3], size: f64) -> [f64; 2] {
+    let t = (20f64).to_radians().tan();
+    let z = 5.0 - p[2];
+    [
+        0.5 * size * (1.0 + p[0] / (z * t)),
+        0.5 * size * (1.0 - p[1] / (z * t)),
+    ]
+}
+
+/// Its derivative along the world velocity `v`.
+fn project_d(p: [f64; 3], v: [f64; 3], size: f64) -> [f64; 2] {
+    let t = (20f64).to_radians().tan();
+    let z = 5.0 - p[2];
+    [
+        0.5 * size * (v[0] * z + p[0] * v[2]) / (z * z * t),
+        -0.5 * size * (v[1] * z + p[1] * v[2]) / (z * z * t),
+    ]
+}
+
+/// The derivative of the projected area (pixels²) of triangle `tri` when
+/// it moves with velocity `v`: the shoelace formula differentiated.
+fn projected_area_derivative(tri: [[f64; 3]; 3], v: [f64; 3], size: f64) -> f64 {
+    let x = tri.map(|p| project(p, size));
+    let dx = tri.map(|p| project_d(p, v, size));
+    let mut area = 0.0;
+    let mut d_area = 0.0;
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        area += 0.5 * (x[i][0] * x[j][1] - x[j][0] * x[i][1]);
+        d_area += 0.5
+            * (dx[i][0] * x[j][1] + x[i][0] * dx[j][1] - dx[j][0] * x[i][1] - x[j][0] * dx[i][1]);
+    }
+    d_area * area.signum()
+}
+
+/// Writes a one-triangle OBJ file for a test and returns its path.
+fn triangle_obj(name: &str, tri: [[f64; 3]; 3]) -> PathBuf {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-{name}.obj",
+        std::process::id()
+    ));
+    let mut text = String::new();
+    for p in tri {
+        text += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    text += "f 1 2 3\n";
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// (a) An emitting triangle over black: with a box filter, the image sum
+/// is radiance × projected area, whose derivative is known in closed form.
+#[test]
+fn triangle_area_derivative_matches_the_analytic_one() {
+    const SIZE: u32 = 64;
+    // tilted, so that a translation parallel to the film changes the area
+    let tri = [[-1.0, -0.8, 0.3], [1.2, -0.5, -0.4], [0.1, 1.0, 0.2]];
+    let obj = triangle_obj("area", tri);
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct"/>
+            {}
+            <shape type="obj" id="tri">
+                <string name="filename" value="{}"/>
+                <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter>
+            </shape>
+        </scene>"#,
+        sensor(SIZE, 1),
+        obj.display()
+    );
+    let scene = load(&xml);
+    let _ = std::fs::remove_file(&obj);
+    for v in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+        let t = translation_tangent(&scene, "tri.vertex_positions", v.map(|x| x as f32)).unwrap();
+        let sums: Vec<f64> = (0..BATCHES)
+            .map(|b| {
+                let d = render_forward(
+                    &scene,
+                    &[("tri.vertex_positions", &t)],
+                    &opts(100 + b, 1, 4),
+                )
+                .unwrap();
+                d.data.iter().map(|&x| x as f64).sum()
+            })
+            .collect();
+        let (mean, se) = stats(&sums);
+        let exact = 6.0 * projected_area_derivative(tri, v, SIZE as f64);
+        eprintln!("triangle moved by {v:?}: {mean:.3} ± {se:.3}, analytic {exact:.3}");
+        assert!(
+            se < 0.01 * exact.abs(),
+            "{v:?}: standard error {se} too large for {exact}"
+        );
+        assert!(
+            (mean - exact).abs() <= 4.0 * se + 2e-3 * exact.abs(),
+            "{v:?}: {mean} ± {se}, analytic {exact}"
+        );
+    }
+}
+
+/// Samples per pixel of the finite differences (stratified: the number of
+/// samples that cross an edge between θ − h and θ + h varies little).
+const FD_SPP: u32 = 256;
+/// Points of the midpoint rule that averages the forward-mode derivative
+/// over the step of the finite differences.
+const STEPS: u32 = 8;
+
+/// The per-pixel comparison of the module documentation, for the
+/// derivative along `tangent` of parameter `key`, finite differences with
+/// step `h`; forward mode with `spp` interior and `sppp` edge samples per
+/// pixel. Pixel values are summed over the channels.
+fn compare_with_finite_differences(
+    name: &str,
+    xml: &str,
+    key: &str,
+    tangent: impl Fn(&Scene) -> Vec<f32>,
+    h: f32,
+    (spp, sppp): (u32, u32),
+) {
+    let mut scene = load(xml);
+    let t = tangent(&scene);
+    let id = scene.params.require(key).unwrap();
+    let base = scene.params.data(id).to_vec();
+    let pixels = |data: &[f32], scale: f64| -> Vec<f64> {
+        data.chunks_exact(3)
+            .map(|c| c.iter().map(|&v| v as f64).sum::<f64>() * scale)
+            .collect()
+    };
+    let (mut fwd, mut fd) = (Vec::new(), Vec::new());
+    // a mesh's vertex normals are recomputed from moved positions unless
+    // they are set in the same update (as in Mitsuba): keep them, they are
+    // right for a translation
+    let normals_key = key.replace("vertex_positions", "vertex_normals");
+    let normals = scene
+        .params
+        .id(&normals_key)
+        .filter(|_| normals_key != key)
+        .map(|id| scene.params.data(id).to_vec());
+    let set = |scene: &mut Scene, s: f32| {
+        let v: Vec<f32> = base.iter().zip(&t).map(|(b, t)| b + s * t).collect();
+        scene.params.set(key, &v).unwrap();
+        if let Some(n) = &normals {
+            scene.params.set(&normals_key, n).unwrap();
+        }
+        scene.update().unwrap();
+    };
+    for b in 0..BATCHES {
+        let o = opts(1000 + b, FD_SPP, 0);
+        set(&mut scene, h);
+        let plus = render(&scene, &o).unwrap().data;
+        set(&mut scene, -h);
+        let minus = render(&scene, &o).unwrap().data;
+        let diff: Vec<f32> = plus.iter().zip(&minus).map(|(p, m)| p - m).collect();
+        fd.push(pixels(&diff, 1.0 / (2.0 * h as f64)));
+        // the derivative averaged over [θ − h, θ + h] (midpoint rule)
+        let mut mean = vec![0.0; diff.len() / 3];
+        for k in 0..STEPS {
+            set(
+                &mut scene,
+                h * (2.0 * (k as f32 + 0.5) / STEPS as f32 - 1.0),
+            );
+            let o = opts(2000 + b * STEPS as u64 + k as u64, spp, sppp);
+            let d = render_forward(&scene, &[(key, &t)], &o).unwrap();
+            let d = pixels(&d.data, 1.0 / STEPS as f64);
+            mean.iter_mut().zip(d).for_each(|(m, d)| *m += d);
+        }
+        set(&mut scene, 0.0);
+        fwd.push(mean);
+    }
+    let n = fd[0].len();
+    let per_pixel =
+        |images: &[Vec<f64>], i: usize| stats(&images.iter().map(|im| im[i]).collect::<Vec<_>>());
+    let scale = (0..n)
+        .map(|i| per_pixel(&fd, i).0.abs())
+        .fold(0.0, f64::max);
+    let floor = 0.01 * scale;
+    let mut z2 = Vec::new();
+    let mut worst = Vec::new();
+    for i in 0..n {
+        let (mf, sf) = per_pixel(&fwd, i);
+        let (md, sd) = per_pixel(&fd, i);
+        if mf.abs().max(md.abs()) > floor {
+            let z = (mf - md).powi(2) / (sf * sf + sd * sd + floor * floor);
+            z2.push(z);
+            worst.push((z, i, mf, sf, md, sd));
+        }
+    }
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let width = (n as f64).sqrt() as usize;
+    for (z, p, mf, sf, md, sd) in worst.iter().take(3) {
+        eprintln!(
+            "{name}: pixel ({}, {}): z² {z:.1}, fwd {mf:.3} ± {sf:.3}, fd {md:.3} ± {sd:.3}",
+            p % width,
+            p / width
+        );
+    }
+    let mean_z2 = z2.iter().sum::<f64>() / z2.len() as f64;
+    let outliers = z2.iter().filter(|&&z| z > 16.0).count();
+    let sums = |images: &[Vec<f64>]| {
+        stats(
+            &images
+                .iter()
+                .map(|im| im.iter().sum())
+                .collect::<Vec<f64>>(),
+        )
+    };
+    let ((sf, ef), (sd, ed)) = (sums(&fwd), sums(&fd));
+    eprintln!(
+        "{name}: {} pixels compared, mean z² {mean_z2:.3}, {outliers} with z > 4; \
+         Σ fwd {sf:.3} ± {ef:.3}, Σ fd {sd:.3} ± {ed:.3}",
+        z2.len()
+    );
+    assert!(
+        z2.len() > 50,
+        "{name}: only {} pixels see the edges",
+        z2.len()
+    );
+    assert!(
+        mean_z2 <= 2.0 && outliers as f64 <= 0.01 * z2.len() as f64,
+        "{name}: mean z² {mean_z2} (≤ 2), {outliers} of {} pixels with z > 4 (≤ 1 %)",
+        z2.len()
+    );
+    let signal = (0..n)
+        .filter(|&i| {
+            let (m, se) = per_pixel(&fd, i);
+            m.abs() > 4.0 * se
+        })
+        .count();
+    assert!(
+        signal >= 50,
+        "{name}: only {signal} pixels have a finite difference above 4 standard errors"
+    );
+    assert!(
+        (sf - sd).abs() <= 4.0 * (ef * ef + ed * ed).sqrt() + 0.01 * sd.abs(),
+        "{name}: Σ fwd {sf} ± {ef}, Σ fd {sd} ± {ed}"
+    );
+}
+
+/// A dark diffuse rectangle in front of a constant emitter (seen as the
+/// background), lit by it: with BSDF sampling only, both sides of every
+/// edge have a constant radiance (0.2 and 1).
+fn rectangle_scene(size: u32) -> String {
+    rectangle_scene_with(&sensor(size, 4))
+}
+
+fn rectangle_scene_with(sensor: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="0"/>
+                <integer name="bsdf_samples" value="1"/>
+            </integrator>
+            {sensor}
+            <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+            <shape type="rectangle" id="rect">
+                <transform name="to_world">
+                    <scale x="1.2" y="0.8"/>
+                    <rotate z="1" angle="20"/>
+                    <rotate y="1" angle="30"/>
+                    <translate x="0.2" y="-0.1"/>
+                </transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.2, 0.2"/></bsdf>
+            </shape>
+        </scene>"#
+    )
+}
+
+/// (b) A rectangle translated in front of a constant background.
+#[test]
+fn rectangle_translation_matches_finite_differences() {
+    let key = "rect.vertex_positions";
+    compare_with_finite_differences(
+        "rectangle moved",
+        &rectangle_scene(32),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (b) The camera translated, the rectangle fixed.
+#[test]
+fn camera_translation_matches_finite_differences() {
+    let key = "camera.to_world";
+    compare_with_finite_differences(
+        "camera moved",
+        &rectangle_scene(32),
+        key,
+        |s| translation_tangent(s, key, [0.5, -1.0, 0.2]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (b) The rectangle translated, seen through Mitsuba's default Gaussian
+/// filter with the film border sampled: the boundary term is splatted
+/// through the filter and normalised by each pixel's filter weight.
+#[test]
+fn gaussian_filter_matches_finite_differences() {
+    let sensor = sensor(32, 4).replace(
+        r#"<rfilter type="box"/>"#,
+        r#"<rfilter type="gaussian"/><boolean name="sample_border" value="true"/>"#,
+    );
+    let key = "rect.vertex_positions";
+    compare_with_finite_differences(
+        "rectangle moved (gaussian filter)",
+        &rectangle_scene_with(&sensor),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (b) The field of view widened: every edge moves towards the centre.
+#[test]
+fn field_of_view_matches_finite_differences() {
+    compare_with_finite_differences(
+        "fov widened",
+        &rectangle_scene(32),
+        "camera.x_fov",
+        |_| vec![1.0],
+        0.3,
+        (1, 16),
+    );
+}
+
+/// (b) An orthographic camera: the rectangle translated, then the camera.
+#[test]
+fn orthographic_camera_matches_finite_differences() {
+    let xml = rectangle_scene_with(&orthographic_sensor(32, 4));
+    let key = "rect.vertex_positions";
+    compare_with_finite_differences(
+        "rectangle moved (orthographic)",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+    let key = "camera.to_world";
+    compare_with_finite_differences(
+        "orthographic camera moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [0.5, -1.0, 0.2]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (c) A cube (one normal per face: flat shading with normal seams at its
+/// edges) under a directional light over black, translated: its silhouette
+/// and the sharp edges between its visible faces move.
+#[test]
+fn flat_shaded_cube_translation_matches_finite_differences() {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-1, -2, -3"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="cube" id="cube">
+                <transform name="to_world">
+                    <scale value="0.8"/>
+                    <rotate y="1" angle="35"/>
+                    <rotate x="1" angle="25"/>
+                </transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4)
+    );
+    let key = "cube.vertex_positions";
+    compare_with_finite_differences(
+        "cube moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// The welded icosphere of `scenes/meshes` under a directional light over
+/// black, flat-shaded (`face_normals`), translated: its outline and every
+/// edge between two visible faces carry a jump (a convex polyhedron does
+/// not shadow itself, so no shadow edge moves).
+#[test]
+fn flat_shaded_sphere_translation_matches_finite_differences() {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-1, -2, -3"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="ply" id="ball">
+                <string name="filename" value="meshes/icosphere3.ply"/>
+                <boolean name="face_normals" value="true"/>
+                <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4)
+    );
+    let key = "ball.vertex_positions";
+    compare_with_finite_differences(
+        "flat-shaded sphere moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// The welded icosphere smooth-shaded with its exact sphere normals, lit
+/// from near the camera (no face shadows a neighbour): its silhouette is
+/// lined by a thin sliver where the view crosses the shading normals'
+/// horizon, whose border moves too; the estimator merges it into the
+/// silhouette's jump (see `diff/primary_boundary.rs`).
+#[test]
+fn smooth_sphere_silhouette_matches_finite_differences() {
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-0.3, -0.4, -1"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="ply" id="ball">
+                <string name="filename" value="meshes/icosphere3.ply"/>
+                <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4)
+    );
+    let key = "ball.vertex_positions";
+    compare_with_finite_differences(
+        "smooth sphere moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// A smooth-shaded closed mesh: an octahedron whose vertex normals all
+/// face the camera (so shading is uniform and never cut off by the view
+/// direction), lit by a directional light from near the camera (every face
+/// seen faces the light: no face shadows a neighbour), over black. Its
+/// edges are all smooth; only the four around its equator are silhouettes
+/// from the camera, and they alone carry the boundary term.
+#[test]
+fn smooth_octahedron_silhouette_matches_finite_differences() {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-octahedron.obj",
+        std::process::id()
+    ));
+    let mut obj = String::new();
+    for v in [
+        [1.0, 0.1, 0.0],
+        [-0.1, 1.0, 0.0],
+        [-1.0, -0.1, 0.0],
+        [0.1, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ] {
+        obj += &format!("v {} {} {}\nvn 0 0 1\n", v[0], v[1], v[2]);
+    }
+    for f in [
+        [1, 2, 5],
+        [2, 3, 5],
+        [3, 4, 5],
+        [4, 1, 5],
+        [2, 1, 6],
+        [3, 2, 6],
+        [4, 3, 6],
+        [1, 4, 6],
+    ] {
+        obj += &format!("f {0}//{0} {1}//{1} {2}//{2}\n", f[0], f[1], f[2]);
+    }
+    std::fs::write(&path, obj).unwrap();
+    let xml = format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct">
+                <integer name="emitter_samples" value="1"/>
+                <integer name="bsdf_samples" value="0"/>
+            </integrator>
+            {}
+            <emitter type="directional">
+                <vector name="direction" value="-0.1, -0.2, -1"/>
+                <rgb name="irradiance" value="3, 3, 3"/>
+            </emitter>
+            <shape type="obj" id="octa">
+                <string name="filename" value="{}"/>
+                <transform name="to_world"><rotate x="1" angle="20"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+            </shape>
+        </scene>"#,
+        sensor(32, 4),
+        path.display()
+    );
+    let scene = load(&xml);
+    let mesh = scene.shapes[0].as_mesh().unwrap();
+    assert_eq!(mesh.edges.counts(), [0, 0, 12, 0, 0], "all edges smooth");
+    let key = "octa.vertex_positions";
+    compare_with_finite_differences(
+        "smooth octahedron moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+    let _ = std::fs::remove_file(&path);
+}
+
+/// Flipped, degenerate (collinear, two corners at one position) and
+/// intersecting triangles: the derivative image stays finite, along
+/// translations and random perturbations of every vertex.
+#[test]
+fn degenerate_and_intersecting_triangles_give_finite_derivatives() {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-degenerate.obj",
+        std::process::id()
+    ));
+    let obj = "\
+        v -1.5 -1 0\nv -0.5 -1 0\nv -1 0 0\n\
+        v 0.5 -1 0\nv 1 0 0\nv 1.5 -1 0\n\
+        v -1 0.5 0\nv 0 0.5 0\nv 1 0.5 0\n\
+        v -1 1 0\nv -1 1 0\nv 0 1.5 0\n\
+        v -0.5 -0.5 -0.5\nv 0.5 0.5 0.5\nv 0.5 -0.5 0.2\n\
+        v -0.5 0.5 0.5\nv 0.5 -0.5 -0.5\nv -0.3 -0.6 0.1\n\
+        f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\nf 13 14 15\nf 16 17 18\n";
+    std::fs::write(&path, obj).unwrap();
+    let xml = rectangle_scene(24).replace(
+        r#"<shape type="rectangle" id="rect">"#,
+        &format!(
+            r#"<shape type="obj" id="bad"><string name="filename" value="{}"/></shape>
+            <shape type="rectangle" id="rect">"#,
+            path.display()
+        ),
+    );
+    let scene = load(&xml);
+    let _ = std::fs::remove_file(&path);
+    let key = "bad.vertex_positions";
+    let tangents = [
+        translation_tangent(&scene, key, [1.0, 0.3, -0.2]).unwrap(),
+        penumbra::diff::perturbation_tangent(&scene, key, 7).unwrap(),
+    ];
+    for t in tangents {
+        let d = render_forward(&scene, &[(key, &t)], &opts(3, 2, 8)).unwrap();
+        assert!(d.data.iter().all(|v| v.is_finite()));
+        assert_eq!(d.non_finite_samples, 0);
+        assert!(d.data.iter().any(|&v| v != 0.0));
+    }
+}
+
+/// The warning no longer names primary visibility when its term is
+/// estimated (forward mode, meshes); it still names shadows and indirect
+/// visibility, and reverse mode still names primary visibility.
+#[test]
+fn warnings_name_only_the_missing_terms() {
+    let seen = Arc::new(Mutex::new(Vec::<String>::new()));
+    let sink = seen.clone();
+    penumbra::warn::set_warning_sink(Some(Arc::new(move |m: &str| {
+        sink.lock().unwrap().push(m.to_string())
+    })));
+    let scene = load(&rectangle_scene(8));
+    let key = "rect.vertex_positions";
+    let t = translation_tangent(&scene, key, [1.0, 0.0, 0.0]).unwrap();
+    let d = render_forward(&scene, &[(key, &t)], &opts(1, 1, 1)).unwrap();
+    let ones = vec![1.0f32; d.data.len()];
+    render_backward(&scene, &ones, Some(&[key]), &opts(1, 1, 1)).unwrap();
+    penumbra::warn::set_warning_sink(None);
+    let seen = seen.lock().unwrap();
+    let ours: Vec<&String> = seen.iter().filter(|m| m.starts_with(key)).collect();
+    assert_eq!(ours.len(), 2, "{seen:?}");
+    assert!(
+        ours[0].contains("boundary term of primary visibility"),
+        "{}",
+        ours[0]
+    );
+    assert!(
+        ours[0].contains("shadows") && ours[0].contains("indirect"),
+        "{}",
+        ours[0]
+    );
+    assert!(ours[0].contains("are missing"), "{}", ours[0]);
+    assert!(
+        ours[1].contains("boundary terms of primary visibility (silhouettes) and of shadows"),
+        "{}",
+        ours[1]
+    );
+}
