@@ -588,7 +588,12 @@ fn forward_and_reverse_mode_agree_for_every_geometry_parameter_kind() {
         assert_forward_matches_reverse(key, &sphere, key);
     }
     let camera = camera_scene("perspective", "");
-    for key in ["camera.to_world", "camera.x_fov", "plane.to_world"] {
+    for key in [
+        "camera.to_world",
+        "camera.x_fov",
+        "plane.to_world",
+        "lamp.position",
+    ] {
         assert_forward_matches_reverse(key, &camera, key);
     }
 }
@@ -654,9 +659,9 @@ fn mesh_to_world() {
 }
 
 /// A camera (id `camera`) of type `kind` at (0, −1.5, 3) looking at the
-/// origin, over the textured plane lit by a point light.
+/// origin, over the textured plane lit by a point light (id `lamp`).
 fn camera_scene(kind: &str, extra: &str) -> String {
-    let light = r#"<emitter type="point">
+    let light = r#"<emitter type="point" id="lamp">
             <point name="position" value="0.5, -0.5, 1.5"/>
             <rgb name="intensity" value="6"/>
         </emitter>"#;
@@ -683,6 +688,18 @@ fn camera_sensor(kind: &str, extra: &str) -> String {
             </film>
         </sensor>"#
     )
+}
+
+#[test]
+fn point_light_moved_over_a_plane() {
+    let xml = camera_scene("perspective", r#"<float name="fov" value="40"/>"#);
+    check(
+        "point light moved",
+        &xml,
+        "lamp.position",
+        |_| vec![0.3, 0.2, -0.4],
+        1e-3,
+    );
 }
 
 #[test]

@@ -326,7 +326,8 @@ def render_backward(
     ``(H, W, 4)`` with an rgba film, whose alpha entries are ignored; any
     other shape is an error naming both), returns ``{key: ∂loss/∂param}``
     shaped like the parameters, for ``keys`` (default: every differentiable
-    parameter that is not geometry). Needs the path integrator.
+    parameter that is not geometry: vertex normals count as geometry). Needs
+    the path or direct integrator.
 
     The paths are replayed with ``seed_grad``, by default
     :func:`gradient_seed` ``(seed)``: samples independent of the image's,

@@ -71,7 +71,8 @@ type SampleGrads = Vec<(u32, u32, f64)>;
 /// length is an error naming both shapes),
 /// by path replay with the same random numbers as
 /// [`crate::integrator::render`] with the same options. `keys` selects
-/// the parameters (default: every differentiable, non-geometric one).
+/// the parameters (default: every differentiable one that moves no surface,
+/// frame or camera: materials, textures, emitters).
 /// Which parameters are recorded, the tapes and the gradient sums live in
 /// this call, not in the scene.
 pub fn render_backward(
@@ -130,7 +131,7 @@ pub fn render_backward(
         None => scene
             .params
             .iter()
-            .filter(|(_, p)| p.flags.differentiable && !p.flags.discontinuous)
+            .filter(|(_, p)| p.flags.differentiable && !p.flags.moves_frames)
             .map(|(id, _)| id)
             .collect(),
     };

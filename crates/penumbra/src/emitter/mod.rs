@@ -120,20 +120,20 @@ pub(crate) fn vec3_or_to_world(
 /// The direction sample of a light at the point `p` (point, spot) seen
 /// from `ref_p`: unit direction and distance to `p`, pdf 1, delta, no
 /// normal; with the direction and squared distance (for the inverse-square
-/// falloff) in `R`, following the reference point. `None` when `ref_p` is
-/// at the light.
+/// falloff) in `R`, following the reference point and the light. `None`
+/// when `ref_p` is at the light.
 pub(crate) fn point_light_sample<R: Real>(
-    p: Vec3,
+    p: V3<R>,
     ref_p: V3<R>,
 ) -> Option<(DirectionSample, V3<R>, R)> {
-    let to = V3::cst(p) - ref_p;
+    let to = p - ref_p;
     let dist2 = to.length_squared();
     if !(dist2.val() > 0.0) {
         return None;
     }
     let d = to / dist2.sqrt();
     let ds = DirectionSample {
-        p,
+        p: p.val(),
         n: Vec3::ZERO,
         d: d.val(),
         dist: dist2.val().sqrt(),

@@ -8,24 +8,33 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
-use crate::params::ParamView;
+use crate::params::{Domain, ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 /// Radiant intensity `intensity` (W/sr, key `<key>.intensity.value`)
-/// emitted equally in all directions from `position` (or the origin of
-/// `to_world`; giving both is an error, as in Mitsuba).
+/// emitted equally in all directions from `position` (key
+/// `<key>.position`, differentiable: moving the light moves its shadows;
+/// given directly or as the origin of `to_world`; giving both is an
+/// error, as in Mitsuba).
 #[derive(Clone, Debug)]
 pub struct Point {
     pub intensity: Texture,
-    pub position: Vec3,
+    pub position: ParamId,
 }
 
 impl Point {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Point> {
         let intensity = emission_prop(node, "intensity", ctx)?;
-        let position = vec3_or_to_world(node, "position", |t| t.point(Vec3::ZERO))?;
+        let p = vec3_or_to_world(node, "position", |t| t.point(Vec3::ZERO))?;
+        let position = ctx.store.add(
+            format!("{}.position", node.key),
+            p.to_array().to_vec(),
+            vec![3],
+            ParamFlags::GEOMETRY,
+            Domain::Finite,
+        )?;
         Ok(Point {
             intensity,
             position,
@@ -42,7 +51,7 @@ impl EmitterT for Point {
         ref_p: V3<R>,
         _u: Vec2,
     ) -> Option<EmitterSample<R>> {
-        let (ds, d, dist2) = point_light_sample(self.position, ref_p)?;
+        let (ds, d, dist2) = point_light_sample(store.read3(self.position, 0), ref_p)?;
         let i = eval_uniform::<R>(&self.intensity, store);
         Some(EmitterSample {
             ds,

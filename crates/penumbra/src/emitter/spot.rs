@@ -75,7 +75,7 @@ impl EmitterT for Spot {
         _u: Vec2,
     ) -> Option<EmitterSample<R>> {
         let pos = self.to_world.point(Vec3::ZERO);
-        let (ds, d, dist2) = point_light_sample(pos, ref_p)?;
+        let (ds, d, dist2) = point_light_sample(V3::cst(pos), ref_p)?;
         // the direction from the light to ref_p in the light's frame
         let inv = self.to_world.inverse().m;
         let row = |i: usize| V3::cst(inv.row(i).truncate());
