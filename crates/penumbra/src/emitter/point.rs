@@ -113,8 +113,10 @@ mod tests {
     fn to_world_places_the_light_and_conflicts_with_position() {
         let t = Transform::translate(Vec3::new(1.0, 2.0, 3.0));
         let n = node("point", "l", vec![("to_world", Value::Transform(t))]);
-        let e = Point::from_node(&n, &mut LoadContext::default()).unwrap();
-        assert_eq!(e.position, Vec3::new(1.0, 2.0, 3.0));
+        let mut ctx = LoadContext::default();
+        let e = Point::from_node(&n, &mut ctx).unwrap();
+        assert_eq!(ctx.store.data(e.position), &[1.0, 2.0, 3.0]);
+        assert_eq!(ctx.store.id("l.position"), Some(e.position));
         let n = node(
             "point",
             "l",
