@@ -65,6 +65,20 @@ fn spp_parser() -> clap::builder::RangedI64ValueParser<u32> {
     clap::value_parser!(u32).range(1..)
 }
 
+/// `--sppp`: edge samples per pixel of the boundary term of primary
+/// visibility, 0 turning it off (the integrator's `sppp`, else the pass's
+/// samples per pixel, when not given).
+#[derive(Args)]
+struct BudgetArgs {
+    /// Edge samples per pixel of the boundary term of primary visibility in
+    /// the derivative passes; 0 turns the term off [default: the
+    /// integrator's sppp, else the samples per pixel].
+    // negative numbers are parsed as values, so that `--sppp -1` is refused
+    // naming the option rather than taken for a flag
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    sppp: Option<u32>,
+}
+
 /// `--translate`: three comma-separated numbers.
 fn vec3_parser(s: &str) -> Result<[f32; 3], String> {
     let v: Vec<f32> = s
@@ -126,6 +140,8 @@ enum Command {
         /// --seed by penumbra::diff::gradient_seed, decorrelated from it].
         #[arg(long)]
         seed_grad: Option<u64>,
+        #[command(flatten)]
+        budgets: BudgetArgs,
         /// Output folder (derivative image, gradient images of textures).
         #[arg(short, long, default_value = "out/grad")]
         output: PathBuf,
@@ -148,6 +164,8 @@ enum Command {
         /// Samples per pixel of each batch.
         #[arg(long, default_value_t = 16, value_parser = spp_parser())]
         spp: u32,
+        #[command(flatten)]
+        budgets: BudgetArgs,
         /// Independent batches for the error bars.
         #[arg(long, default_value_t = 4)]
         batches: u32,
@@ -350,6 +368,7 @@ fn run(cli: Cli) -> Result<(), String> {
             spp,
             seed,
             seed_grad,
+            budgets,
             output,
             reps,
             run,
@@ -379,6 +398,7 @@ fn run(cli: Cli) -> Result<(), String> {
             for i in 0..runs {
                 let opts = RenderOptions {
                     spp,
+                    sppp: budgets.sppp,
                     seed: seed + i as u64,
                     threads: run.threads,
                     force: run.force,
@@ -497,6 +517,7 @@ fn run(cli: Cli) -> Result<(), String> {
             scene: scene_args,
             params,
             spp,
+            budgets,
             batches,
             eps,
             translate,
@@ -534,6 +555,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 };
                 let opts = CheckOptions {
                     spp,
+                    sppp: budgets.sppp,
                     batches,
                     eps,
                     tangent,

@@ -318,3 +318,38 @@ fn grad_decorrelates_the_gradient_seed_by_default_and_honours_seed_grad() {
     assert_eq!(default, grad(&["--seed-grad", &derived]));
     assert_ne!(default, grad(&["--seed-grad", "5"]), "the image's own seed");
 }
+
+/// `--sppp` sets the budget of the boundary term of primary visibility
+/// (0: off) on the commands that compute derivatives; a negative value is
+/// refused naming the option.
+#[test]
+fn sppp_sets_the_primary_boundary_budget_of_derivative_commands() {
+    let dir = fresh_dir("sppp");
+    let dimage = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let args = [
+            &[
+                "grad", "-q", "-D", "res=8", "--spp", "1", "--mode", "forward",
+            ][..],
+            &["--param", "small-box.vertex_positions", "-o"],
+            &[out.to_str().unwrap()],
+            extra,
+        ]
+        .concat();
+        run_ok(&args);
+        penumbra::image::read_image(&out.join("dimage.exr"))
+            .unwrap()
+            .data
+    };
+    let off = dimage("off", &["--sppp", "0"]);
+    let default = dimage("default", &[]);
+    let explicit = dimage("explicit", &["--sppp", "1"]);
+    assert_eq!(default, explicit, "the default budget is --spp");
+    assert_ne!(off, default, "--sppp 0 removes the silhouettes' term");
+    assert!(off.iter().all(|v| v.is_finite()));
+    for cmd in ["grad", "check-grad"] {
+        let (code, err) = run_err(&[cmd, "--sppp", "-1", "--param", "red.reflectance.value"]);
+        assert_eq!(code, Some(2), "{cmd}: {err}");
+        assert!(err.contains("'--sppp <N>'"), "{cmd}: {err}");
+    }
+}

@@ -196,3 +196,24 @@ def test_adjoint_shapes_must_match_the_film():
         )
         with pytest.raises(ValueError, match=msg):
             pn.render_backward(s, np.ones(bad, np.float32), keys=key)
+
+
+def test_sppp_sets_the_primary_visibility_budget(scene):
+    # the floor (a mesh) slides along x: its visible edges move
+    t = np.zeros((4, 4), np.float32)
+    t[0, 3] = 1.0
+    tangent = {"floor.to_world": t}
+    full = pn.render_forward(scene, tangent, spp=2)
+    off = pn.render_forward(scene, tangent, spp=2, sppp=0)
+    assert not np.array_equal(full, off), "sppp=0 removes the edges' term"
+    assert np.array_equal(full, pn.render_forward(scene, tangent, spp=2, sppp=2))
+    # Mitsuba's name and budget on the integrator; the call's sppp wins
+    proj = {"type": "prb_projective", "max_depth": 3, "rr_depth": 100, "sppp": 0}
+    assert np.array_equal(off, pn.render_forward(scene, tangent, spp=2, integrator=proj))
+    assert np.array_equal(
+        full, pn.render_forward(scene, tangent, spp=2, sppp=2, integrator=proj)
+    )
+    with pytest.raises(ValueError, match="sppp must be a non-negative integer"):
+        pn.render_forward(scene, tangent, spp=1, sppp=-1)
+    with pytest.raises(ValueError, match="sppp must be a non-negative integer"):
+        pn.render_backward(scene, np.ones((20, 20, 3), np.float32), spp=1, sppp=-1)

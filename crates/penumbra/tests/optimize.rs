@@ -203,3 +203,30 @@ fn pose_job_errors_name_the_problem() {
     assert!(e.contains("no [[param]] or [[pose]]"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A job's `sppp` is the gradient passes' budget of the boundary term of
+/// primary visibility; a negative one is refused naming it.
+#[test]
+fn job_sppp_is_read_and_checked() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = std::env::temp_dir().join(format!("penumbra-job-sppp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let load = |sppp: &str| {
+        let job = dir.join("job.toml");
+        std::fs::write(
+            &job,
+            format!(
+                "scene = \"{}\"\ndefines = {{ res = \"8\" }}\niterations = 1\nspp = 1\n\
+                 sppp = {sppp}\ntarget = {{ render_spp = 1 }}\n\
+                 [[param]]\nkey = \"plane.vertex_positions\"\nlr = 0.01\n",
+                repo.join("scenes/textured.xml").display()
+            ),
+        )
+        .unwrap();
+        Job::load(&job)
+    };
+    assert_eq!(load("0").unwrap().spec.sppp, Some(0));
+    let e = load("-1").err().unwrap().to_string();
+    assert!(e.contains("sppp"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -191,6 +191,17 @@ def _spp(spp):
     return int(spp)
 
 
+def _sppp(sppp):
+    if sppp is None:
+        return None  # the integrator's sppp, else the pass's spp
+    if not isinstance(sppp, (int, np.integer)) or isinstance(sppp, bool) or sppp < 0:
+        raise ValueError(
+            f"sppp must be a non-negative integer (0 turns the boundary term of primary "
+            f"visibility off), got {sppp!r}"
+        )
+    return int(sppp)
+
+
 def _seed(seed):
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
@@ -289,10 +300,16 @@ def render_forward(
     progress=False,
     threads=None,
     force=False,
+    sppp=None,
 ) -> np.ndarray:
     """Forward-mode derivative: the image ``dI/dθ · t`` (``(H, W, 3)``
     float32) along the tangent ``t`` given as ``{key: array shaped like the
-    parameter}``; parameters not listed have zero tangent."""
+    parameter}``; parameters not listed have zero tangent.
+
+    ``spp`` (interior term) and ``sppp`` (edge samples per pixel of the
+    boundary term of primary visibility, 0: off) override the integrator's
+    ``sppc`` and ``sppp``; without either, the integrator's budgets apply,
+    else the scene sampler's sample count."""
     _check_scene(scene)
     if not hasattr(tangents, "items"):
         raise TypeError(f"tangents must be a dict {{key: array}}, got {type(tangents).__name__}")
@@ -304,6 +321,7 @@ def render_forward(
         ts.append((k, as_float_array(v, k, shape, what="tangent").reshape(-1)))
     return scene.render_forward(
         ts,
+        sppp=_sppp(sppp),
         **_render_options(spp, seed, sensor, integrator, progress, threads, force),
     )
 
@@ -320,6 +338,7 @@ def render_backward(
     threads=None,
     seed_grad=None,
     force=False,
+    sppp=None,
 ) -> dict:
     """Reverse-mode derivative (path replay): given ``d_image`` =
     ∂loss/∂image of the image rendered with ``seed`` (``(H, W, 3)``, or
@@ -332,7 +351,11 @@ def render_backward(
     The paths are replayed with ``seed_grad``, by default
     :func:`gradient_seed` ``(seed)``: samples independent of the image's,
     so that the gradient of a non-linear loss is unbiased. ``seed_grad=seed``
-    gives the exact derivative of the rendered estimate instead."""
+    gives the exact derivative of the rendered estimate instead.
+
+    ``spp`` and ``sppp`` override the integrator's ``sppc`` and ``sppp`` as
+    in :func:`render_forward` (reverse mode estimates no boundary term
+    yet)."""
     _check_scene(scene)
     a = _adjoint(scene, d_image, _sensor(sensor))
     if keys is not None:
@@ -344,6 +367,7 @@ def render_backward(
     return scene.render_backward(
         a,
         keys=keys,
+        sppp=_sppp(sppp),
         **_render_options(spp, seed_grad, sensor, integrator, progress, threads, force),
     )
 

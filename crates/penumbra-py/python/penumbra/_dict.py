@@ -48,7 +48,7 @@ for _cls, _names in {
     for _n in _names.split():
         PLUGIN_CLASS[_n] = _cls
 
-INTEGRATORS = ("path", "direct", "aov")
+INTEGRATORS = ("path", "prb", "prb_basic", "prb_projective", "direct", "direct_projective", "aov")
 
 
 def quoteattr(s):

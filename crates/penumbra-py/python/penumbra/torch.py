@@ -24,7 +24,17 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from . import Scene, _adjoint, _integrator, _seed, _sensor, _spp, as_float_array, gradient_seed
+from . import (
+    Scene,
+    _adjoint,
+    _integrator,
+    _seed,
+    _sensor,
+    _spp,
+    _sppp,
+    as_float_array,
+    gradient_seed,
+)
 
 __all__ = ["render", "RenderFunction", "PoseFunction"]
 
@@ -79,6 +89,7 @@ class RenderFunction(torch.autograd.Function):
             _adjoint(scene, g.to(torch.float32), o["sensor"]),
             keys=need,
             spp=o["spp_grad"],
+            sppp=o["sppp"],
             seed=o["seed_grad"],
             sensor=o["sensor"],
             integrator=o["integrator"],
@@ -130,6 +141,7 @@ def render(
     integrator=None,
     sensor=0,
     progress=False,
+    sppp=None,
 ) -> torch.Tensor:
     """Renders ``scene`` with the parameter values ``params`` = ``{key:
     tensor}`` and returns the image ``(H, W, C)`` as a tensor through which
@@ -137,7 +149,9 @@ def render(
     else float32). ``spp_grad`` (default ``spp``) and ``seed_grad``
     (default :func:`penumbra.gradient_seed` ``(seed)``) set the backward
     pass's samples; ``seed_grad=seed`` (and equal spp) makes the gradient
-    the exact derivative of the rendered estimate."""
+    the exact derivative of the rendered estimate. ``sppp`` is the
+    backward pass's budget of the boundary term of primary visibility (see
+    :func:`penumbra.render_forward`)."""
     if not isinstance(scene, Scene):
         raise TypeError(f"expected a penumbra Scene, got {type(scene).__name__}")
     params = {} if params is None else params
@@ -167,6 +181,7 @@ def render(
         seed=_seed(seed),
         spp_grad=_spp(spp_grad if spp_grad is not None else spp),
         seed_grad=gradient_seed(seed) if seed_grad is None else _seed(seed_grad),
+        sppp=_sppp(sppp),
         sensor=_sensor(sensor),
         integrator=_integrator(integrator),
         progress=progress,

@@ -51,6 +51,10 @@ impl Estimate {
 pub struct CheckOptions {
     /// Samples per pixel of each batch.
     pub spp: u32,
+    /// Edge samples per pixel of the boundary term of primary visibility
+    /// in the derivative passes ([`RenderOptions::sppp`]; default: the
+    /// integrator's `sppp`, else `spp`).
+    pub sppp: Option<u32>,
     /// Independent batches (different seeds) for the error bars.
     pub batches: u32,
     /// Relative step of the finite differences.
@@ -71,6 +75,7 @@ impl Default for CheckOptions {
     fn default() -> Self {
         CheckOptions {
             spp: 16,
+            sppp: None,
             batches: 4,
             eps: 1e-2,
             threads: None,
@@ -182,6 +187,7 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
         for b in 0..opts.batches {
             let ro = RenderOptions {
                 spp: Some(opts.spp),
+                sppp: opts.sppp,
                 seed: 1000 + b as u64,
                 threads: opts.threads,
                 force: opts.force,

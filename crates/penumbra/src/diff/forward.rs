@@ -3,7 +3,9 @@
 //! derivative image along a tangent direction costs one extra pass of the
 //! same code (like Mitsuba's `render_forward`). When geometry or the
 //! camera moves, the boundary term of primary visibility is added
-//! (`primary_boundary.rs`, its own budget `RenderOptions::sppp`).
+//! (`primary_boundary.rs`). The budgets of both terms come from the call's
+//! options, else from the integrator (`sppc`, `sppp`; see
+//! `integrator::Budgets`).
 
 use super::{primary_boundary, warn_missing_boundary_terms};
 use crate::ad::Dual;
@@ -20,11 +22,14 @@ use crate::scene::Scene;
 /// boundary term of primary visibility, added when the tangent moves
 /// geometry or a pinhole or orthographic camera, is estimated by samples of
 /// its own on the edges. The tangents live in this call, not in the scene.
+/// `opts.spp` and `opts.sppp`, where given, override the integrator's
+/// `sppc` and `sppp`; a budget of 0 leaves its term out.
 pub fn render_forward(
     scene: &Scene,
     tangents: &[(&str, &[f32])],
     opts: &RenderOptions,
 ) -> Result<Rendered> {
+    let opts = &scene.integrator.derivative_options(scene, opts)?;
     let seeds = Seeds::tangents(&scene.params, tangents)?;
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
     let primary = primary_boundary::applies(scene, opts)?;
@@ -43,6 +48,17 @@ fn derivative_image(scene: &Scene, store: &ParamView, opts: &RenderOptions) -> R
         return Err(Error::Invalid(
             "the aov integrator has no derivatives; use path or direct".into(),
         ));
+    }
+    if opts.spp == Some(0) {
+        // sppc = 0: the interior term is off
+        let (width, height) = scene.sensor(opts.sensor)?.film.crop_size;
+        return Ok(Rendered {
+            width,
+            height,
+            channel_names: vec!["R".into(), "G".into(), "B".into()],
+            data: vec![0.0; width * height * 3],
+            non_finite_samples: 0,
+        });
     }
     let (block, non_finite_samples) =
         render_samples(scene, opts, 3, "forward mode", |cs, rng, out| {

@@ -74,13 +74,15 @@ type SampleGrads = Vec<(u32, u32, f64)>;
 /// the parameters (default: every differentiable one that moves no surface,
 /// frame or camera: materials, textures, emitters).
 /// Which parameters are recorded, the tapes and the gradient sums live in
-/// this call, not in the scene.
+/// this call, not in the scene. `opts.spp`, where given, overrides the
+/// integrator's `sppc`; 0 leaves the interior term out.
 pub fn render_backward(
     scene: &Scene,
     d_image: &[f32],
     keys: Option<&[&str]>,
     opts: &RenderOptions,
 ) -> Result<Gradients> {
+    let opts = &scene.integrator.derivative_options(scene, opts)?;
     if let Integrator::Aov(_) = scene.integrator {
         return Err(Error::Invalid(
             "the aov integrator has no derivatives; use path or direct".into(),
@@ -136,8 +138,13 @@ pub fn render_backward(
             .collect(),
     };
     let seeds = Seeds::recorded(&scene.params, &ids)?;
-    let (sums, non_finite_samples) =
-        backward_pass(scene, &scene.params.view(&seeds), &d_image, opts)?;
+    let (sums, non_finite_samples) = if opts.spp == Some(0) {
+        // sppc = 0: the interior term, the only one estimated here, is off
+        let zeros = scene.params.iter().map(|(_, p)| vec![0.0; p.data.len()]);
+        (zeros.collect(), 0)
+    } else {
+        backward_pass(scene, &scene.params.view(&seeds), &d_image, opts)?
+    };
     Ok(Gradients {
         non_finite_samples,
         entries: ids

@@ -1,7 +1,7 @@
 //! Direct illumination with multiple importance sampling of emitters and
-//! the BSDF (Mitsuba's `direct`).
+//! the BSDF (Mitsuba's `direct`, and its `direct_projective`).
 
-use super::{mis_weight, scatter};
+use super::{mis_weight, scatter, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
@@ -19,10 +19,12 @@ pub struct DirectIntegrator {
     pub emitter_samples: u32,
     pub bsdf_samples: u32,
     pub hide_emitters: bool,
+    /// Sample budgets of the derivative passes (`direct_projective`).
+    pub budgets: Budgets,
 }
 
 impl DirectIntegrator {
-    pub fn from_node(node: &Node) -> Result<DirectIntegrator> {
+    pub(crate) fn from_node(node: &Node) -> Result<DirectIntegrator> {
         let shading = node.int_min("shading_samples", 1, 0)? as u32;
         let emitter_samples = node.int_min("emitter_samples", shading as i64, 0)? as u32;
         let bsdf_samples = node.int_min("bsdf_samples", shading as i64, 0)? as u32;
@@ -30,6 +32,42 @@ impl DirectIntegrator {
             emitter_samples,
             bsdf_samples,
             hide_emitters: node.bool("hide_emitters", false)?,
+            budgets: Budgets::default(),
+        })
+    }
+
+    /// Mitsuba's `direct_projective`: its estimator is this one with one
+    /// emitter and one BSDF sample per hit, plus the derivative budgets.
+    /// Mitsuba reads `max_depth` and `rr_depth` there but always traces
+    /// depth 2, and `project_seed` chooses the seed rays of the indirect
+    /// term; all three are accepted (so that its scenes load) and warned
+    /// about when they would change something.
+    pub(crate) fn projective_from_node(node: &Node) -> Result<DirectIntegrator> {
+        let budgets = Budgets::from_projective_node(node)?;
+        let mut ignored = Vec::new();
+        if super::max_depth(node, 2)? != 2 {
+            ignored.push("max_depth");
+        }
+        for name in ["rr_depth", "project_seed"] {
+            if node.has(name) {
+                ignored.push(name);
+            }
+        }
+        node.int_min("rr_depth", 5, 1)?;
+        node.choice("project_seed", &["both", "bsdf", "emitter"])?;
+        if !ignored.is_empty() {
+            crate::warn(format!(
+                "{node} at {}: {} ignored: direct illumination always traces depth 2 and the \
+                 indirect visibility term that project_seed serves is not implemented yet",
+                node.loc,
+                ignored.join(", ")
+            ));
+        }
+        Ok(DirectIntegrator {
+            emitter_samples: 1,
+            bsdf_samples: 1,
+            hide_emitters: node.bool("hide_emitters", false)?,
+            budgets,
         })
     }
 

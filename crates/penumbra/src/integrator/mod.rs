@@ -2,11 +2,13 @@
 //! the tiled render loop that drives them.
 
 mod aov;
+mod budgets;
 mod direct;
 pub(crate) mod path;
 pub(crate) mod render;
 
 pub use aov::{AovIntegrator, AovKind};
+pub use budgets::Budgets;
 pub use direct::DirectIntegrator;
 pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
@@ -22,10 +24,14 @@ use crate::sampler::SampleStream;
 use crate::scene::{Node, Scene};
 use crate::sensor::CameraSample;
 
-/// All integrator plugins.
+/// All integrator plugins. Mitsuba's differentiable integrators are
+/// names of these: every radiance integrator here is differentiable, in
+/// both modes.
 #[derive(Clone, Debug)]
 pub enum Integrator {
+    /// `path`, `prb`, `prb_basic`, `prb_projective`.
     Path(PathIntegrator),
+    /// `direct`, `direct_projective`.
     Direct(DirectIntegrator),
     Aov(AovIntegrator),
 }
@@ -33,17 +39,49 @@ pub enum Integrator {
 impl Integrator {
     pub fn from_node(node: &Node) -> Result<Integrator> {
         let i = match node.plugin.as_str() {
-            "path" => Integrator::Path(PathIntegrator::from_node(node)?),
+            "path" => Integrator::Path(PathIntegrator::from_node(node, -1, Budgets::default())?),
+            "prb" | "prb_basic" => {
+                Integrator::Path(PathIntegrator::from_node(node, 6, Budgets::default())?)
+            }
+            "prb_projective" => Integrator::Path(PathIntegrator::from_node(
+                node,
+                6,
+                Budgets::from_projective_node(node)?,
+            )?),
             "direct" => Integrator::Direct(DirectIntegrator::from_node(node)?),
+            "direct_projective" => {
+                Integrator::Direct(DirectIntegrator::projective_from_node(node)?)
+            }
             "aov" => Integrator::Aov(AovIntegrator::from_node(node)?),
             other => {
                 return Err(node.error(format!(
-                    "unknown integrator plugin '{other}' (Penumbra has: path, direct, aov)"
+                    "unknown integrator plugin '{other}' (Penumbra has: path, prb, prb_basic, \
+                     prb_projective, direct, direct_projective, aov)"
                 )))
             }
         };
         node.check_all_used()?;
         Ok(i)
+    }
+
+    /// The sample budgets this integrator gives derivative passes.
+    pub fn budgets(&self) -> Budgets {
+        match self {
+            Integrator::Path(p) => p.budgets,
+            Integrator::Direct(d) => d.budgets,
+            Integrator::Aov(_) => Budgets::default(),
+        }
+    }
+
+    /// The options of a derivative pass: `opts` with the integrator's
+    /// budgets filled in ([`Budgets::resolve`]).
+    pub(crate) fn derivative_options(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+    ) -> Result<RenderOptions> {
+        let sampler_spp = scene.sensor(opts.sensor)?.sampler.sample_count();
+        Ok(self.budgets().resolve(opts, sampler_spp))
     }
 
     /// Names of the output channels (EXR channel names).
@@ -219,8 +257,8 @@ pub(crate) fn mis_weight(pdf_a: f32, pdf_b: f32) -> f32 {
 }
 
 /// `max_depth` as Mitsuba defines it: -1 for unbounded, else ≥ 0.
-pub(crate) fn max_depth(node: &Node) -> Result<u32> {
-    let d = node.int("max_depth", -1)?;
+pub(crate) fn max_depth(node: &Node, default: i64) -> Result<u32> {
+    let d = node.int("max_depth", default)?;
     if d < -1 {
         let p = node
             .prop("max_depth")

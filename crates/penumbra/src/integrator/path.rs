@@ -1,8 +1,10 @@
 //! Unidirectional path tracing with next-event estimation and multiple
 //! importance sampling (power heuristic, Veach 1997 §9.2), Russian roulette
-//! (Mitsuba's `path`).
+//! (Mitsuba's `path`, and under the names of its differentiable path
+//! tracers `prb`, `prb_basic` and `prb_projective`: here one estimator
+//! serves the primal and both derivative modes).
 
-use super::{mis_weight, scatter};
+use super::{mis_weight, scatter, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
@@ -23,14 +25,24 @@ pub struct PathIntegrator {
     pub rr_depth: u32,
     /// Directly visible emitters are not shown.
     pub hide_emitters: bool,
+    /// Sample budgets of the derivative passes (`prb_projective`).
+    pub budgets: Budgets,
 }
 
 impl PathIntegrator {
-    pub fn from_node(node: &Node) -> Result<PathIntegrator> {
+    /// The settings of `node`, with `max_depth` defaulting to
+    /// `default_max_depth` (Mitsuba's `path`: -1, its `prb*`: 6) and the
+    /// derivative `budgets` read by the caller.
+    pub(crate) fn from_node(
+        node: &Node,
+        default_max_depth: i64,
+        budgets: Budgets,
+    ) -> Result<PathIntegrator> {
         Ok(PathIntegrator {
-            max_depth: super::max_depth(node)?,
+            max_depth: super::max_depth(node, default_max_depth)?,
             rr_depth: node.int_min("rr_depth", 5, 1)? as u32,
             hide_emitters: node.bool("hide_emitters", false)?,
+            budgets,
         })
     }
 

@@ -19,6 +19,9 @@
 //!                                    # default out/optimize/<job name>/
 //! iterations = 60
 //! spp = 16
+//! sppp = 16                          # optional: edge samples per pixel of
+//!                                    # the primary-visibility boundary
+//!                                    # term (default: the integrator's)
 //! loss = "l2"                        # l1 | l2 | rel_l2
 //! optimizer = { method = "adam" }    # or { method = "sgd", momentum = 0.9 }
 //! target = { render_spp = 256 }      # or { images = ["target.exr"] }
@@ -78,6 +81,10 @@ pub struct JobFile {
     pub iterations: u32,
     #[serde(default = "default_spp")]
     pub spp: u32,
+    /// Edge samples per pixel of the boundary term of primary visibility
+    /// in the gradient passes ([`RenderOptions::sppp`]; default: the
+    /// integrator's `sppp`, else `spp`).
+    pub sppp: Option<u32>,
     #[serde(default = "default_loss")]
     pub loss: String,
     #[serde(default)]
@@ -429,6 +436,7 @@ impl Job {
                 // covariance of the image noise and its derivative
                 let ro_grad = RenderOptions {
                     seed: crate::diff::gradient_seed(ro.seed),
+                    sppp: spec.sppp,
                     ..ro.clone()
                 };
                 let g = render_backward(scene, &d_img, Some(&keys), &ro_grad)?;

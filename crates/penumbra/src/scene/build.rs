@@ -202,6 +202,7 @@ impl Scene {
                 max_depth: u32::MAX,
                 rr_depth: 5,
                 hide_emitters: false,
+                budgets: Default::default(),
             })),
             accel,
         })
