@@ -794,7 +794,7 @@ fn assert_modes_agree(name: &str, scene: &Scene, key: &str, seed: u64) {
 /// positions, a mesh's `to_world`, the camera's `to_world` and its field
 /// of view on the rectangle scene, and the vertex positions of a cube
 /// under a directional light (whose shading, unlike the rectangle's, also
-/// has an interior term).
+/// has an interior term) and of the smooth icosphere of `scenes/geom.xml`.
 #[test]
 fn forward_and_reverse_mode_agree_with_the_boundary_term() {
     let rect = load(&rectangle_scene(32));
@@ -808,6 +808,10 @@ fn forward_and_reverse_mode_agree_with_the_boundary_term() {
     }
     let cube = load(&cube_scene());
     assert_modes_agree("cube", &cube, "cube.vertex_positions", 12);
+    // a path tracer's noisy jumps across a smooth mesh's silhouette
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/geom.xml");
+    let geom = Scene::load_file(&path, &[("res".into(), "32".into())]).unwrap();
+    assert_modes_agree("geom", &geom, "obj.vertex_positions", 13);
 }
 
 /// The reverse-mode gradient of the image sum of an emitting triangle
