@@ -1,7 +1,8 @@
-//! The boundary term of primary visibility (forward mode): derivatives of
-//! images whose silhouettes and sharp edges move, where the interior term
-//! alone is wrong (zero, in these scenes: every surface and the background
-//! have constant radiance, so the whole derivative is the boundary term).
+//! The boundary term of primary visibility (forward mode; reverse mode
+//! against it and against one analytic case): derivatives of images whose
+//! silhouettes and sharp edges move, where the interior term alone is
+//! wrong (zero, in these scenes: every surface and the background have
+//! constant radiance, so the whole derivative is the boundary term).
 //!
 //! Tolerances come from the estimators' own noise: every quantity is
 //! estimated over `BATCHES` independent batches (different seeds), giving
@@ -141,14 +142,11 @@ fn triangle_obj(name: &str, tri: [[f64; 3]; 3]) -> PathBuf {
     path
 }
 
-/// (a) An emitting triangle over black: with a box filter, the image sum
-/// is radiance × projected area, whose derivative is known in closed form.
-#[test]
-fn triangle_area_derivative_matches_the_analytic_one() {
-    const SIZE: u32 = 64;
-    // tilted, so that a translation parallel to the film changes the area
-    let tri = [[-1.0, -0.8, 0.3], [1.2, -0.5, -0.4], [0.1, 1.0, 0.2]];
-    let obj = triangle_obj("area", tri);
+/// The triangle `tri` emitting (1, 2, 3) over black, seen by [`sensor`]
+/// (one sample per pixel): with a box filter, the image sum is radiance ×
+/// projected area.
+fn triangle_scene(name: &str, tri: [[f64; 3]; 3], size: u32) -> Scene {
+    let obj = triangle_obj(name, tri);
     let xml = format!(
         r#"<scene version="3.0.0">
             <integrator type="direct"/>
@@ -158,11 +156,22 @@ fn triangle_area_derivative_matches_the_analytic_one() {
                 <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter>
             </shape>
         </scene>"#,
-        sensor(SIZE, 1),
+        sensor(size, 1),
         obj.display()
     );
     let scene = load(&xml);
     let _ = std::fs::remove_file(&obj);
+    scene
+}
+
+/// (a) An emitting triangle over black: with a box filter, the image sum
+/// is radiance × projected area, whose derivative is known in closed form.
+#[test]
+fn triangle_area_derivative_matches_the_analytic_one() {
+    const SIZE: u32 = 64;
+    // tilted, so that a translation parallel to the film changes the area
+    let tri = [[-1.0, -0.8, 0.3], [1.2, -0.5, -0.4], [0.1, 1.0, 0.2]];
+    let scene = triangle_scene("area", tri, SIZE);
     for v in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
         let t = translation_tangent(&scene, "tri.vertex_positions", v.map(|x| x as f32)).unwrap();
         let sums: Vec<f64> = (0..BATCHES)
@@ -447,7 +456,20 @@ fn orthographic_camera_matches_finite_differences() {
 /// and the sharp edges between its visible faces move.
 #[test]
 fn flat_shaded_cube_translation_matches_finite_differences() {
-    let xml = format!(
+    let key = "cube.vertex_positions";
+    compare_with_finite_differences(
+        "cube moved",
+        &cube_scene(),
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// The cube of [`flat_shaded_cube_translation_matches_finite_differences`].
+fn cube_scene() -> String {
+    format!(
         r#"<scene version="3.0.0">
             <integrator type="direct">
                 <integer name="emitter_samples" value="1"/>
@@ -468,16 +490,7 @@ fn flat_shaded_cube_translation_matches_finite_differences() {
             </shape>
         </scene>"#,
         sensor(32, 4)
-    );
-    let key = "cube.vertex_positions";
-    compare_with_finite_differences(
-        "cube moved",
-        &xml,
-        key,
-        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
-        0.01,
-        (1, 16),
-    );
+    )
 }
 
 /// The welded icosphere of `scenes/meshes` under a directional light over
@@ -667,8 +680,8 @@ fn degenerate_and_intersecting_triangles_give_finite_derivatives() {
 }
 
 /// The warning no longer names primary visibility when its term is
-/// estimated (forward mode, meshes); it still names shadows and indirect
-/// visibility, and reverse mode still names primary visibility.
+/// estimated (forward and reverse mode, meshes); it still names shadows
+/// and indirect visibility.
 #[test]
 fn warnings_name_only_the_missing_terms() {
     let seen = Arc::new(Mutex::new(Vec::<String>::new()));
@@ -686,20 +699,155 @@ fn warnings_name_only_the_missing_terms() {
     let seen = seen.lock().unwrap();
     let ours: Vec<&String> = seen.iter().filter(|m| m.starts_with(key)).collect();
     assert_eq!(ours.len(), 2, "{seen:?}");
-    assert!(
-        ours[0].contains("boundary term of primary visibility"),
-        "{}",
-        ours[0]
+    for m in ours {
+        assert!(m.contains("boundary term of primary visibility"), "{m}");
+        assert!(m.contains("shadows") && m.contains("indirect"), "{m}");
+        assert!(m.contains("are missing"), "{m}");
+    }
+}
+
+/// Uniform pseudo-random numbers in [−1, 1) (a fixed LCG: the test's
+/// directions are the same on every run).
+fn uniform(seed: u64, n: usize) -> Vec<f32> {
+    let mut x = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    (0..n)
+        .map(|_| {
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((x >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// Forward and reverse mode take the same samples (film and edges), so
+/// for a tangent v and an adjoint image δI, ⟨δI, dI/dθ·v⟩ from forward
+/// mode equals ⟨∂L/∂θ, v⟩ from reverse mode up to rounding, boundary term
+/// included. Rounding: both sum the same products in different orders,
+/// in f32 per sample and f64 across samples, so the difference is a few
+/// f32 ulps of the sum of the absolute terms, bounded here by 1e-4 of
+/// Σ_p |δI_p (dI/dθ·v)_p| (measured: below 1e-7 of it). The boundary
+/// term must be a large part of those terms (without it the test would
+/// only check the interior term). The gradient does not depend on the
+/// number of threads.
+fn assert_modes_agree(name: &str, scene: &Scene, key: &str, seed: u64) {
+    let n = scene
+        .params
+        .get(scene.params.require(key).unwrap())
+        .data
+        .len();
+    let mut v = uniform(seed, n);
+    if key.ends_with(".to_world") {
+        // the affine part only: the last row stays (0, 0, 0, 1), as a
+        // pose's does
+        v[12..].fill(0.0);
+    }
+    let o = opts(seed, 2, 2);
+    let fwd = render_forward(scene, &[(key, &v)], &o).unwrap();
+    let adjoint = uniform(seed + 1, fwd.data.len());
+    let dot = |img: &[f32]| -> (f64, f64) {
+        img.iter()
+            .zip(&adjoint)
+            .fold((0.0, 0.0), |(s, a), (&d, &w)| {
+                (s + d as f64 * w as f64, a + (d as f64 * w as f64).abs())
+            })
+    };
+    let (lhs, scale) = dot(&fwd.data);
+    let interior = render_forward(scene, &[(key, &v)], &opts(seed, 2, 0)).unwrap();
+    let boundary: Vec<f32> = fwd
+        .data
+        .iter()
+        .zip(&interior.data)
+        .map(|(f, i)| f - i)
+        .collect();
+    let (_, boundary_scale) = dot(&boundary);
+    let g = render_backward(scene, &adjoint, Some(&[key]), &o).unwrap();
+    let one_thread = RenderOptions {
+        threads: Some(1),
+        ..o.clone()
+    };
+    let g1 = render_backward(scene, &adjoint, Some(&[key]), &one_thread).unwrap();
+    assert_eq!(g.get(key), g1.get(key), "{name}: depends on the threads");
+    let rhs: f64 = g
+        .get(key)
+        .unwrap()
+        .iter()
+        .zip(&v)
+        .map(|(&g, &v)| g as f64 * v as f64)
+        .sum();
+    eprintln!(
+        "{name}: forward {lhs:.6e}, reverse {rhs:.6e}, relative difference {:.2e} of \
+         Σ|terms| {scale:.4e} (boundary term: {boundary_scale:.4e})",
+        (lhs - rhs).abs() / scale
     );
     assert!(
-        ours[0].contains("shadows") && ours[0].contains("indirect"),
-        "{}",
-        ours[0]
+        (lhs - rhs).abs() <= 1e-4 * scale,
+        "{name}: forward {lhs}, reverse {rhs}"
     );
-    assert!(ours[0].contains("are missing"), "{}", ours[0]);
     assert!(
-        ours[1].contains("boundary terms of primary visibility (silhouettes) and of shadows"),
-        "{}",
-        ours[1]
+        boundary_scale > 0.25 * scale,
+        "{name}: the boundary term is too small to test ({boundary_scale} of {scale})"
+    );
+}
+
+/// Forward/reverse agreement (see [`assert_modes_agree`]) for vertex
+/// positions, a mesh's `to_world`, the camera's `to_world` and its field
+/// of view on the rectangle scene, and the vertex positions of a cube
+/// under a directional light (whose shading, unlike the rectangle's, also
+/// has an interior term) and of the smooth icosphere of `scenes/geom.xml`.
+#[test]
+fn forward_and_reverse_mode_agree_with_the_boundary_term() {
+    let rect = load(&rectangle_scene(32));
+    for key in [
+        "rect.vertex_positions",
+        "rect.to_world",
+        "camera.to_world",
+        "camera.x_fov",
+    ] {
+        assert_modes_agree(key, &rect, key, 11);
+    }
+    let cube = load(&cube_scene());
+    assert_modes_agree("cube", &cube, "cube.vertex_positions", 12);
+    // a path tracer's noisy jumps across a smooth mesh's silhouette
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/geom.xml");
+    let geom = Scene::load_file(&path, &[("res".into(), "32".into())]).unwrap();
+    assert_modes_agree("geom", &geom, "obj.vertex_positions", 13);
+}
+
+/// The reverse-mode gradient of the image sum of an emitting triangle
+/// (adjoint image 1): its dot product with a translation is the analytic
+/// derivative of radiance × projected area, as in forward mode
+/// ([`triangle_area_derivative_matches_the_analytic_one`], same
+/// tolerances).
+#[test]
+fn reverse_mode_triangle_area_derivative_matches_the_analytic_one() {
+    const SIZE: u32 = 64;
+    let tri = [[-1.0, -0.8, 0.3], [1.2, -0.5, -0.4], [0.1, 1.0, 0.2]];
+    let scene = triangle_scene("reverse", tri, SIZE);
+    let key = "tri.vertex_positions";
+    let v = [1.0, 0.0, 0.0];
+    let t = translation_tangent(&scene, key, v.map(|x| x as f32)).unwrap();
+    let ones = vec![1.0f32; (SIZE * SIZE * 3) as usize];
+    let sums: Vec<f64> = (0..BATCHES)
+        .map(|b| {
+            let g = render_backward(&scene, &ones, Some(&[key]), &opts(100 + b, 1, 4)).unwrap();
+            g.get(key)
+                .unwrap()
+                .iter()
+                .zip(&t)
+                .map(|(&g, &t)| g as f64 * t as f64)
+                .sum()
+        })
+        .collect();
+    let (mean, se) = stats(&sums);
+    let exact = 6.0 * projected_area_derivative(tri, v, SIZE as f64);
+    eprintln!("reverse mode, triangle moved by {v:?}: {mean:.3} ± {se:.3}, analytic {exact:.3}");
+    assert!(
+        se < 0.01 * exact.abs(),
+        "standard error {se} too large for {exact}"
+    );
+    assert!(
+        (mean - exact).abs() <= 4.0 * se + 2e-3 * exact.abs(),
+        "{mean} ± {se}, analytic {exact}"
     );
 }

@@ -1,5 +1,5 @@
 //! Derivative estimators: forward (tangent) mode, path-replay reverse mode,
-//! and boundary terms (docs/architecture.md §4): forward mode adds the
+//! and boundary terms (docs/architecture.md §4): both modes add the
 //! boundary term of primary visibility ([`primary_boundary`]); those of
 //! shadows and indirect visibility are to come. Forward mode gives a
 //! derivative image for a tangent over the parameters; reverse mode gives

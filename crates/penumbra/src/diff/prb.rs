@@ -17,8 +17,11 @@
 //! not grow with the image size or the sample count. Unlike Mitsuba's
 //! megakernel on a GPU, one CPU thread owns one path at a time, so storing
 //! that path's tape costs kilobytes.
+//!
+//! The boundary term of primary visibility is added by
+//! `primary_boundary.rs`, which records one edge at a time.
 
-use super::warn_missing_boundary_terms;
+use super::{primary_boundary, warn_missing_boundary_terms};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
@@ -72,7 +75,11 @@ type SampleGrads = Vec<(u32, u32, f64)>;
 /// by path replay with the same random numbers as
 /// [`crate::integrator::render`] with the same options. `keys` selects
 /// the parameters (default: every differentiable one that moves no surface,
-/// frame or camera: materials, textures, emitters).
+/// frame or camera: materials, textures, emitters). When one of them moves
+/// geometry or a pinhole or orthographic camera, the boundary term of
+/// primary visibility is added, from the same edge samples as
+/// [`super::render_forward`] takes with the same options (`sppp`), so that
+/// the two modes agree up to rounding.
 /// Which parameters are recorded, the tapes and the gradient sums live in
 /// this call, not in the scene. `opts.spp`, where given, overrides the
 /// integrator's `sppc`; 0 leaves the interior term out.
@@ -123,9 +130,11 @@ pub fn render_backward(
             "the image gradient has a non-finite value at index {i}"
         )));
     }
+    let primary = primary_boundary::applies(scene, opts)?;
+    let mut edges_move = false;
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            warn_missing_boundary_terms(scene, keys, false)?;
+            edges_move = warn_missing_boundary_terms(scene, keys, primary)?;
             keys.iter()
                 .map(|k| scene.params.require(k))
                 .collect::<std::result::Result<_, _>>()?
@@ -138,13 +147,19 @@ pub fn render_backward(
             .collect(),
     };
     let seeds = Seeds::recorded(&scene.params, &ids)?;
-    let (sums, non_finite_samples) = if opts.spp == Some(0) {
-        // sppc = 0: the interior term, the only one estimated here, is off
+    let store = scene.params.view(&seeds);
+    let (mut sums, mut non_finite_samples) = if opts.spp == Some(0) {
+        // sppc = 0: the interior term is off
         let zeros = scene.params.iter().map(|(_, p)| vec![0.0; p.data.len()]);
         (zeros.collect(), 0)
     } else {
-        backward_pass(scene, &scene.params.view(&seeds), &d_image, opts)?
+        backward_pass(scene, &store, &d_image, opts)?
     };
+    if edges_move && primary {
+        non_finite_samples += primary_boundary::add_primary_boundary_gradients(
+            scene, &store, &d_image, opts, &mut sums,
+        )?;
+    }
     Ok(Gradients {
         non_finite_samples,
         entries: ids

@@ -1,9 +1,9 @@
-//! The boundary term of primary visibility in forward mode: edge sampling
-//! on the film (Li et al. 2018, "Differentiable Monte Carlo Ray Tracing
-//! through Edge Sampling"; the sample budget and the projected-length
-//! density follow the primary term of Zhang et al. 2023, "Projective
-//! Sampling for Differentiable Rendering of Geometry", and Mitsuba's
-//! `direct_projective`, whose `sppp` it is named after).
+//! The boundary term of primary visibility in forward and reverse mode:
+//! edge sampling on the film (Li et al. 2018, "Differentiable Monte Carlo
+//! Ray Tracing through Edge Sampling"; the sample budget and the
+//! projected-length density follow the primary term of Zhang et al. 2023,
+//! "Projective Sampling for Differentiable Rendering of Geometry", and
+//! Mitsuba's `direct_projective`, whose `sppp` it is named after).
 //!
 //! # What is estimated
 //!
@@ -34,9 +34,11 @@
 //!
 //! Per render, every candidate edge (boundary, sharp, non-manifold, and
 //! smooth edges that are silhouettes from the camera) whose image moves
-//! along the tangent is projected onto the film in `Dual` (vertices read
-//! through the store, so the positions' and `to_world`'s tangents and the
-//! sensor's pose and field of view all move it), clipped to the near plane
+//! with the parameters is projected onto the film in the number type of
+//! the pass (vertices read through the store, so the positions and
+//! `to_world` and the sensor's pose and field of view all move it; in
+//! `Dual`, an edge moves if its end points have a non-zero tangent, in
+//! `Var` if they depend on a recorded parameter), clipped to the near plane
 //! in camera space and to the sampled film region in the film. Edges are
 //! picked with probability proportional to their clipped projected
 //! length, then a point uniformly along it: density `1 / total length` on
@@ -58,6 +60,11 @@
 //! parallel and splatted in chunk order, so the image is identical for a
 //! seed whatever the number of threads.
 //!
+//! Reverse mode ([`add_primary_boundary_gradients`]) takes the same
+//! samples (the same edges for a generic tangent over the same keys, the
+//! same positions for a seed) and contracts them with the adjoint image
+//! instead of splatting them, so that both modes agree up to rounding.
+//!
 //! Not handled here: thin-lens cameras (the edge's image is blurred by the
 //! aperture), the silhouettes of analytic shapes (spheres, disks), edges
 //! cut by the near plane (the cut itself is a moving edge of the image),
@@ -73,16 +80,17 @@
 //! from it (a shadow edge seen directly) is left to the shadow estimator
 //! to come.
 
-use crate::ad::{Dual, Real};
+use crate::ad::reverse::{backward, clear_tape};
+use crate::ad::{Dual, Real, Var};
 use crate::error::{Error, Result};
-use crate::geometry::edges::{EdgeKind, EdgeTable};
-use crate::geometry::{DiffRay, Shape};
+use crate::geometry::edges::{Edge, EdgeKind, EdgeTable, Eye};
+use crate::geometry::{DiffRay, Mesh, Shape};
 use crate::image::{ImageBlock, ReconstructionFilter};
 use crate::integrator::{RenderOptions, Rendered};
-use crate::math::{DiscreteDistribution, V3};
+use crate::math::{DiscreteDistribution, V2, V3};
 use crate::params::ParamView;
 use crate::scene::Scene;
-use crate::sensor::{CameraSample, Projector, Sensor};
+use crate::sensor::{CameraSample, Sensor};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
@@ -103,27 +111,82 @@ pub(crate) fn applies(scene: &Scene, opts: &RenderOptions) -> Result<bool> {
     Ok(opts.sppp != Some(0) && sensor.projector::<f32>(&scene.params.primal()).is_some())
 }
 
-/// One projected edge that moves along the tangent.
-struct Segment {
+/// The number type of a boundary pass: how it tells that the image of an
+/// edge moves with the parameters, and what a segment keeps of that
+/// motion. Forward mode (`Dual`) keeps the tangents of the end points;
+/// reverse mode (`Var`) keeps nothing, since a tape holds one edge at a
+/// time: it records the edge again to backpropagate its samples' weight.
+trait EdgeMotion: Real {
+    type Motion: Sync;
+    /// Runs `project`, which computes the film end points of one edge in
+    /// `Self` and something primal, and returns the end points' values and
+    /// their motion (`scale` turns film units into pixels) with the primal
+    /// part, or `None` if the edge is not projected or does not move.
+    fn motion<T>(
+        project: impl FnOnce() -> Option<(V2<Self>, V2<Self>, T)>,
+        scale: Vec2,
+    ) -> Option<(Vec2, Vec2, Self::Motion, T)>;
+}
+
+impl EdgeMotion for Dual {
+    /// The derivatives of the two end points along the tangent (pixels).
+    type Motion = (Vec2, Vec2);
+
+    fn motion<T>(
+        project: impl FnOnce() -> Option<(V2<Dual>, V2<Dual>, T)>,
+        scale: Vec2,
+    ) -> Option<(Vec2, Vec2, (Vec2, Vec2), T)> {
+        let (f0, f1, t) = project()?;
+        let d = |f: V2<Dual>| Vec2::new(f.x.d, f.y.d) * scale;
+        let (da, db) = (d(f0), d(f1));
+        let moves = (da != Vec2::ZERO || db != Vec2::ZERO) && da.is_finite() && db.is_finite();
+        moves.then(|| (f0.val(), f1.val(), (da, db), t))
+    }
+}
+
+impl EdgeMotion for Var {
+    type Motion = ();
+
+    fn motion<T>(
+        project: impl FnOnce() -> Option<(V2<Var>, V2<Var>, T)>,
+        _scale: Vec2,
+    ) -> Option<(Vec2, Vec2, (), T)> {
+        clear_tape();
+        let projected = project();
+        // the edge was recorded only to see whether it depends on a
+        // recorded parameter: the tape would otherwise grow with the mesh
+        clear_tape();
+        let (f0, f1, t) = projected?;
+        let moves = [f0.x, f0.y, f1.x, f1.y].iter().any(|v| v.is_attached());
+        moves.then(|| (f0.val(), f1.val(), (), t))
+    }
+}
+
+/// One projected edge that moves with the parameters.
+struct Segment<M> {
     /// End points on the film (crop-window pixels), after clipping to the
-    /// near plane, and their derivatives along the tangent.
+    /// near plane, and their unit normal (the jump and the normal velocity
+    /// are measured along it).
     a: Vec2,
     b: Vec2,
-    da: Vec2,
-    db: Vec2,
+    n: Vec2,
+    motion: M,
     /// The part `a + s (b − a)`, s ∈ [s0, s1], inside the sampled region.
     s0: f32,
     s1: f32,
     /// The world-space end points (near-clipped), for the visibility test.
     p0: Vec3,
     p1: Vec3,
-    /// The shape of the edge, if it is smooth-shaded (vertex normals): its
+    /// The shape and its edge (index in its edge table).
+    shape: u32,
+    edge: u32,
+    /// Whether the shape is smooth-shaded (vertex normals): its
     /// silhouettes may be lined with a shading-horizon sliver (see
     /// [`Context::beyond_horizon`]).
-    smooth_shape: Option<u32>,
+    smooth: bool,
 }
 
-impl Segment {
+impl<M> Segment<M> {
     fn length(&self) -> f32 {
         (self.b - self.a).length() * (self.s1 - self.s0)
     }
@@ -136,26 +199,68 @@ struct Region {
     hi: Vec2,
 }
 
-/// The clipped segments of every candidate edge of every mesh that moves
-/// on the film along the tangents of `store`.
-fn segments(
-    scene: &Scene,
+/// The film end points (full-film units, in `R`) of the edge `e` of `mesh`
+/// seen by `sensor`, clipped to the near plane in camera space, and their
+/// world positions (primal); `None` if the edge is wholly behind the near
+/// plane or the camera has no projection. Forward and reverse mode both
+/// run this, so the motion they differentiate is the same.
+fn project_edge<R: Real>(
+    sensor: &Sensor,
     store: &ParamView,
-    proj: &Projector<Dual>,
+    mesh: &Mesh,
+    e: &Edge,
+) -> Option<(V2<R>, V2<R>, [Vec3; 2])> {
+    let proj = sensor.projector::<R>(store)?;
+    let near = proj.near * (1.0 + 1e-4);
+    let (_, tri) = mesh.triangle_r::<R>(store, e.face);
+    let k = e.corner as usize;
+    let (w0, w1) = (tri[k], tri[(k + 1) % 3]);
+    let (q0, q1) = (proj.to_local(w0), proj.to_local(w1));
+    let (z0, z1) = (q0.z.val(), q1.z.val());
+    if !(z0 >= near || z1 >= near) {
+        return None;
+    }
+    // the points where the edge enters the visible half-space, at fixed
+    // fractions of the edge (points that move with it)
+    let t0 = if z0 < near {
+        (near - z0) / (z1 - z0)
+    } else {
+        0.0
+    };
+    let t1 = if z1 < near {
+        (near - z1) / (z0 - z1)
+    } else {
+        0.0
+    };
+    let lerp = |a: V3<R>, b: V3<R>, t: f32| a + (b - a) * R::cst(t);
+    let (q0, q1) = (lerp(q0, q1, t0), lerp(q1, q0, t1));
+    let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
+    let (w0, w1) = (w0.val(), w1.val());
+    Some((
+        proj.film(q0),
+        proj.film(q1),
+        [lerp(w0, w1, t0), lerp(w1, w0, t1)],
+    ))
+}
+
+/// The clipped segments of every candidate edge of every mesh whose image
+/// moves with the parameters `store` seeds in `R`.
+fn segments<R: EdgeMotion>(
+    scene: &Scene,
+    sensor: &Sensor,
+    store: &ParamView,
+    eye: Eye,
     to_pixels: &dyn Fn(Vec2) -> Vec2,
     region: Region,
     scale: Vec2,
-) -> Vec<Segment> {
-    let eye = proj.eye();
-    let near = proj.near * (1.0 + 1e-4);
+) -> Vec<Segment<R::Motion>> {
     let mut out = Vec::new();
     for (shape_index, shape) in scene.shapes.iter().enumerate() {
         let Shape::Mesh(mesh) = shape else {
             continue;
         };
-        let smooth_shape = mesh.normals.map(|_| shape_index as u32);
         let positions = store.data(mesh.positions);
-        for e in &mesh.edges.edges {
+        for (edge_index, e) in mesh.edges.edges.iter().enumerate() {
             match e.kind {
                 EdgeKind::Inert => continue,
                 EdgeKind::Smooth if !EdgeTable::is_silhouette(e, &mesh.faces, positions, eye) => {
@@ -163,53 +268,31 @@ fn segments(
                 }
                 _ => {}
             }
-            let (_, tri) = mesh.triangle_r::<Dual>(store, e.face);
-            let k = e.corner as usize;
-            let (w0, w1) = (tri[k], tri[(k + 1) % 3]);
-            let (q0, q1) = (proj.to_local(w0), proj.to_local(w1));
-            let (z0, z1) = (q0.z.val(), q1.z.val());
-            if !(z0 >= near || z1 >= near) {
+            let Some((f0, f1, motion, [p0, p1])) =
+                R::motion(|| project_edge::<R>(sensor, store, mesh, e), scale)
+            else {
                 continue;
-            }
-            // the points where the edge enters the visible half-space, at
-            // fixed fractions of the edge (points that move with it)
-            let t0 = if z0 < near {
-                (near - z0) / (z1 - z0)
-            } else {
-                0.0
             };
-            let t1 = if z1 < near {
-                (near - z1) / (z0 - z1)
-            } else {
-                0.0
-            };
-            let lerp = |a: V3<Dual>, b: V3<Dual>, t: f32| a + (b - a) * Dual::cst(t);
-            let (q0, q1) = (lerp(q0, q1, t0), lerp(q1, q0, t1));
-            let (f0, f1) = (proj.film(q0), proj.film(q1));
-            let px =
-                |f: crate::math::V2<Dual>| (to_pixels(f.val()), Vec2::new(f.x.d, f.y.d) * scale);
-            let ((a, da), (b, db)) = (px(f0), px(f1));
-            if da == Vec2::ZERO && db == Vec2::ZERO {
-                continue;
-            }
+            let (a, b) = (to_pixels(f0), to_pixels(f1));
             let Some((s0, s1)) = clip(a, b, region) else {
                 continue;
             };
-            let lerp = |a: Vec3, b: Vec3, t: f32| a + (b - a) * t;
-            let (w0, w1) = (w0.val(), w1.val());
+            let dir = b - a;
             let seg = Segment {
                 a,
                 b,
-                da,
-                db,
+                n: Vec2::new(-dir.y, dir.x).normalize(),
+                motion,
                 s0,
                 s1,
-                p0: lerp(w0, w1, t0),
-                p1: lerp(w1, w0, t1),
-                smooth_shape,
+                p0,
+                p1,
+                shape: shape_index as u32,
+                edge: edge_index as u32,
+                smooth: mesh.normals.is_some(),
             };
             let len = seg.length();
-            if len > 0.0 && len.is_finite() && da.is_finite() && db.is_finite() {
+            if len > 0.0 && len.is_finite() {
                 out.push(seg);
             }
         }
@@ -284,152 +367,251 @@ pub(crate) fn add_primary_boundary(
     opts: &RenderOptions,
     image: &mut Rendered,
 ) -> Result<()> {
-    let sensor = scene.sensor(opts.sensor)?;
-    let Some(proj) = sensor.projector::<Dual>(store) else {
+    let Some(ctx) = Context::<(Vec2, Vec2)>::new::<Dual>(scene, store, opts)? else {
         return Ok(());
     };
-    let film = &sensor.film;
-    let (cw, ch) = film.crop_size;
-    let border = if film.sample_border {
-        film.rfilter.border() as f32
-    } else {
-        0.0
-    };
-    let region = Region {
-        lo: Vec2::splat(-border),
-        hi: Vec2::new(cw as f32 + border, ch as f32 + border),
-    };
-    let size = Vec2::new(film.width as f32, film.height as f32);
-    let crop_off = Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32);
-    let to_pixels = |f: Vec2| f * size - crop_off;
-    let segs = segments(scene, store, &proj, &to_pixels, region, size);
-    let lengths: Vec<f32> = segs.iter().map(Segment::length).collect();
-    let Some(dist) = DiscreteDistribution::new(&lengths) else {
-        return Ok(());
-    };
-    let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
-    let sppp = opts.sppp.unwrap_or(spp) as u64;
-    let n_samples = sppp * (cw * ch) as u64;
-    let n_chunks = n_samples.div_ceil(CHUNK as u64) as usize;
-    let ctx = Context {
-        scene,
-        sensor,
-        segs: &segs,
-        dist: &dist,
-        total: dist.sum() as f32,
-        eps: 1e-3 * (size.max_element() / 1000.0).max(1.0),
-        crop_off,
-        inv_size: size.recip(),
-        seed: opts.seed,
-        n_samples,
-    };
-    // per-pixel normalisation: W_p = Wx(i) · Wy(j) (separable filter,
-    // rectangular region)
-    let filter = &film.rfilter;
-    let wx: Vec<f64> = (0..cw)
-        .map(|i| {
-            filter_integral(
-                filter,
-                region.lo.x - i as f32 - 0.5,
-                region.hi.x - i as f32 - 0.5,
-            )
-        })
-        .collect();
-    let wy: Vec<f64> = (0..ch)
-        .map(|j| {
-            filter_integral(
-                filter,
-                region.lo.y - j as f32 - 0.5,
-                region.hi.y - j as f32 - 0.5,
-            )
-        })
-        .collect();
-    let bounds = ImageBlock::new(0, 0, cw, ch, 0);
-    let mut acc = vec![0.0f64; cw * ch * 3];
-    let mut non_finite = 0usize;
-    let run = |chunks: std::ops::Range<usize>| -> Vec<Option<(Vec<Splat>, usize)>> {
-        chunks
-            .into_par_iter()
-            .map(|c| {
-                if opts
-                    .cancel
-                    .as_ref()
-                    .is_some_and(|c| c.load(Ordering::Relaxed))
-                {
-                    return None;
-                }
-                Some(ctx.chunk(c))
-            })
-            .collect()
-    };
-    let pool = match opts.threads {
-        Some(n) => Some(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n.max(1))
-                .build()
-                .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?,
-        ),
-        None => None,
-    };
-    for first in (0..n_chunks).step_by(CHUNKS_PER_BATCH) {
-        let chunks = first..(first + CHUNKS_PER_BATCH).min(n_chunks);
-        let results = match &pool {
-            Some(p) => p.install(|| run(chunks)),
-            None => run(chunks),
-        };
-        for r in results {
-            let (splats, bad) = r.ok_or(Error::Interrupted)?;
-            non_finite += bad;
-            for s in splats {
-                bounds.footprint(filter, s.x.x, s.x.y, |i, j, w| {
-                    let (i, j) = (i as usize, j as usize);
-                    let w = w / (wx[i] * wy[j]);
-                    let o = 3 * (j * cw + i);
-                    for c in 0..3 {
-                        acc[o + c] += w * s.value[c] as f64;
-                    }
-                });
-            }
+    let mut acc = vec![0.0f64; image.data.len()];
+    image.non_finite_samples += ctx.run(opts, |seg, splat, pixel, w| {
+        let (da, db) = seg.motion;
+        let v_n = seg.n.dot(da + (db - da) * splat.s);
+        for c in 0..3 {
+            acc[3 * pixel + c] += w * (splat.value[c] * v_n) as f64;
         }
-    }
-    image.non_finite_samples += non_finite;
-    if non_finite > 0 {
-        crate::warn(format!(
-            "primary visibility boundary term: {non_finite} edge sample(s) had a NaN or infinite \
-             value and were left out"
-        ));
-    }
-    let n = n_samples as f64;
+    })?;
     for (d, a) in image.data.iter_mut().zip(&acc) {
-        *d += (a / n) as f32;
+        *d += *a as f32;
     }
     Ok(())
 }
 
-/// One edge sample's contribution before filtering: `ΔL v_n / pdf` at film
-/// position `x` (crop-window pixels).
+/// Adds the primary boundary term of the gradient of a loss, given its
+/// adjoint image `d_image` (crop-window height × width × 3), to `sums`
+/// (per parameter, per element, for the parameters `store` records) of
+/// the render `opts` describes; returns the number of non-finite edge
+/// samples left out.
+///
+/// The term is `Σ_samples Σ_p δI_p k_p(x)/W_p · ΔL/pdf · ⟨dx/dθ, n⟩`, the
+/// forward mode estimate of the same samples (same edges, same positions)
+/// contracted with δI. Only x moves with θ, and it is the point at the
+/// fixed fraction s between the projected end points: `⟨x, n⟩ = (1 − s)
+/// ⟨a, n⟩ + s ⟨b, n⟩` with n held fixed. So the samples' weights (without
+/// the motion) are summed per segment and end point, and each segment is
+/// recorded once more on the tape and `⟨a, n⟩`, `⟨b, n⟩` are
+/// backpropagated with those sums, in segment order (the result does not
+/// depend on the thread count).
+pub(crate) fn add_primary_boundary_gradients(
+    scene: &Scene,
+    store: &ParamView,
+    d_image: &[f32],
+    opts: &RenderOptions,
+    sums: &mut [Vec<f64>],
+) -> Result<usize> {
+    let Some(ctx) = Context::<()>::new::<Var>(scene, store, opts)? else {
+        return Ok(0);
+    };
+    let mut weights = vec![[0.0f64; 2]; ctx.segs.len()];
+    let non_finite = ctx.run(opts, |_, splat, pixel, w| {
+        let adjoint: f32 = (0..3)
+            .map(|c| d_image[3 * pixel + c] * splat.value[c])
+            .sum();
+        let a = w * adjoint as f64;
+        let s = splat.s as f64;
+        let ws = &mut weights[splat.seg as usize];
+        ws[0] += a * (1.0 - s);
+        ws[1] += a * s;
+    })?;
+    for (seg, [wa, wb]) in ctx.segs.iter().zip(weights) {
+        if wa == 0.0 && wb == 0.0 {
+            continue;
+        }
+        clear_tape();
+        let projected = scene.shapes[seg.shape as usize].as_mesh().and_then(|mesh| {
+            project_edge::<Var>(
+                ctx.sensor,
+                store,
+                mesh,
+                &mesh.edges.edges[seg.edge as usize],
+            )
+        });
+        let Some((f0, f1, _)) = projected else {
+            continue;
+        };
+        // ⟨to_pixels(f), n⟩ up to a constant
+        let n = seg.n * ctx.scale;
+        let normal = |f: V2<Var>| f.x * n.x + f.y * n.y;
+        backward(
+            &[(normal(f0), wa as f32), (normal(f1), wb as f32)],
+            |id, i, g| sums[id.0 as usize][i] += g as f64,
+        );
+    }
+    Ok(non_finite)
+}
+
+/// One edge sample's contribution before filtering and motion: `ΔL / pdf`
+/// at film position `x` (crop-window pixels), the point at fraction `s`
+/// of segment `seg`.
 struct Splat {
     x: Vec2,
+    seg: u32,
+    s: f32,
     value: [f32; 3],
 }
 
-/// What every edge sample reads.
-struct Context<'a> {
+/// The edge samples of one render: what every sample reads, and the
+/// per-pixel normalisation of the splats.
+struct Context<'a, M> {
     scene: &'a Scene,
     sensor: &'a Sensor,
-    segs: &'a [Segment],
-    dist: &'a DiscreteDistribution,
+    segs: Vec<Segment<M>>,
+    dist: DiscreteDistribution,
     /// Total projected length (pixels): the inverse of the density.
     total: f32,
     /// Offset (pixels) from the edge to either side.
     eps: f32,
     crop_off: Vec2,
     inv_size: Vec2,
+    /// Film units to pixels.
+    scale: Vec2,
     seed: u64,
     n_samples: u64,
+    /// Crop-window width, and the filter integrals `Wx(i)`, `Wy(j)` with
+    /// `W_p = Wx(i) · Wy(j)` (separable filter, rectangular region).
+    width: usize,
+    wx: Vec<f64>,
+    wy: Vec<f64>,
 }
 
-impl Context<'_> {
+impl<'a, M: Sync> Context<'a, M> {
+    /// The segments moving with the parameters `store` seeds in `R` and
+    /// the sampling of the render `opts` describes, or `None` if there is
+    /// nothing to sample.
+    fn new<R: EdgeMotion<Motion = M>>(
+        scene: &'a Scene,
+        store: &ParamView,
+        opts: &RenderOptions,
+    ) -> Result<Option<Self>> {
+        let sensor = scene.sensor(opts.sensor)?;
+        let Some(proj) = sensor.projector::<f32>(store) else {
+            return Ok(None);
+        };
+        let film = &sensor.film;
+        let (cw, ch) = film.crop_size;
+        let border = if film.sample_border {
+            film.rfilter.border() as f32
+        } else {
+            0.0
+        };
+        let region = Region {
+            lo: Vec2::splat(-border),
+            hi: Vec2::new(cw as f32 + border, ch as f32 + border),
+        };
+        let size = Vec2::new(film.width as f32, film.height as f32);
+        let crop_off = Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32);
+        let to_pixels = |f: Vec2| f * size - crop_off;
+        let segs = segments::<R>(scene, sensor, store, proj.eye(), &to_pixels, region, size);
+        let lengths: Vec<f32> = segs.iter().map(Segment::length).collect();
+        let Some(dist) = DiscreteDistribution::new(&lengths) else {
+            return Ok(None);
+        };
+        let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
+        let sppp = opts.sppp.unwrap_or(spp) as u64;
+        let filter = &film.rfilter;
+        let integrals = |n: usize, lo: f32, hi: f32| -> Vec<f64> {
+            (0..n)
+                .map(|i| filter_integral(filter, lo - i as f32 - 0.5, hi - i as f32 - 0.5))
+                .collect()
+        };
+        Ok(Some(Context {
+            scene,
+            sensor,
+            segs,
+            total: dist.sum() as f32,
+            dist,
+            eps: 1e-3 * (size.max_element() / 1000.0).max(1.0),
+            crop_off,
+            inv_size: size.recip(),
+            scale: size,
+            seed: opts.seed,
+            n_samples: sppp * (cw * ch) as u64,
+            width: cw,
+            wx: integrals(cw, region.lo.x, region.hi.x),
+            wy: integrals(ch, region.lo.y, region.hi.y),
+        }))
+    }
+
+    /// Draws the `sppp × pixels` edge samples and calls `visit(segment,
+    /// sample, pixel, weight)` for every pixel p (index in the crop window)
+    /// the filter reaches from every non-zero sample, with weight
+    /// `k_p(x) / (W_p · samples)`, in a fixed order: samples are computed
+    /// in chunks in parallel and visited in chunk order, so the result is
+    /// the same for a seed whatever the number of threads. Returns the
+    /// number of non-finite samples left out (and warns about them).
+    fn run(
+        &self,
+        opts: &RenderOptions,
+        mut visit: impl FnMut(&Segment<M>, &Splat, usize, f64),
+    ) -> Result<usize> {
+        let n_chunks = self.n_samples.div_ceil(CHUNK as u64) as usize;
+        let filter = &self.sensor.film.rfilter;
+        let bounds = ImageBlock::new(0, 0, self.wx.len(), self.wy.len(), 0);
+        let n = self.n_samples as f64;
+        let mut non_finite = 0usize;
+        let run = |chunks: std::ops::Range<usize>| -> Vec<Option<(Vec<Splat>, usize)>> {
+            chunks
+                .into_par_iter()
+                .map(|c| {
+                    if opts
+                        .cancel
+                        .as_ref()
+                        .is_some_and(|c| c.load(Ordering::Relaxed))
+                    {
+                        return None;
+                    }
+                    Some(self.chunk(c))
+                })
+                .collect()
+        };
+        let pool = match opts.threads {
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n.max(1))
+                    .build()
+                    .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?,
+            ),
+            None => None,
+        };
+        for first in (0..n_chunks).step_by(CHUNKS_PER_BATCH) {
+            let chunks = first..(first + CHUNKS_PER_BATCH).min(n_chunks);
+            let results = match &pool {
+                Some(p) => p.install(|| run(chunks)),
+                None => run(chunks),
+            };
+            for r in results {
+                let (splats, bad) = r.ok_or(Error::Interrupted)?;
+                non_finite += bad;
+                for s in splats {
+                    let seg = &self.segs[s.seg as usize];
+                    bounds.footprint(filter, s.x.x, s.x.y, |i, j, w| {
+                        let (i, j) = (i as usize, j as usize);
+                        visit(
+                            seg,
+                            &s,
+                            j * self.width + i,
+                            w / (self.wx[i] * self.wy[j] * n),
+                        );
+                    });
+                }
+            }
+        }
+        if non_finite > 0 {
+            crate::warn(format!(
+                "primary visibility boundary term: {non_finite} edge sample(s) had a NaN or \
+                 infinite value and were left out"
+            ));
+        }
+        Ok(non_finite)
+    }
+
     /// The film position `eps` from `x` towards `dir` (a unit vector) or,
     /// if the camera sees there the back of the shading normals of the
     /// smooth-shaded `shape` through its front faces, the first position
@@ -506,13 +688,7 @@ impl Context<'_> {
             let (i, _, u) = self.dist.sample_reuse(u.min(1.0 - f32::EPSILON));
             let seg = &self.segs[i];
             let s = seg.s0 + u * (seg.s1 - seg.s0);
-            let dir = seg.b - seg.a;
-            let n = Vec2::new(-dir.y, dir.x).normalize();
-            let x = seg.a + dir * s;
-            let v_n = n.dot(seg.da + (seg.db - seg.da) * s);
-            if v_n == 0.0 {
-                continue;
-            }
+            let (x, n) = (seg.a + (seg.b - seg.a) * s, seg.n);
             // the edge must be what the camera sees at x
             let ray = self
                 .camera_sample(x)
@@ -527,7 +703,11 @@ impl Context<'_> {
                 }
             }
             let radiance = |side: f32| {
-                let cs = self.camera_sample(self.beyond_horizon(x, n * side, seg.smooth_shape));
+                let cs = self.camera_sample(self.beyond_horizon(
+                    x,
+                    n * side,
+                    seg.smooth.then_some(seg.shape),
+                ));
                 let mut r = rng.clone();
                 scene
                     .integrator
@@ -537,12 +717,14 @@ impl Context<'_> {
             // the jump from the side n points to, to the side it points
             // away from (module documentation)
             let jump = radiance(-1.0) - radiance(1.0);
-            let value = jump * (v_n * self.total);
+            let value = jump * self.total;
             if !value.is_finite() {
                 non_finite += 1;
             } else if value != Vec3::ZERO {
                 out.push(Splat {
                     x,
+                    seg: i as u32,
+                    s,
                     value: value.to_array(),
                 });
             }

@@ -9,7 +9,6 @@ mod thinlens;
 
 pub use orthographic::Orthographic;
 pub use perspective::Perspective;
-pub(crate) use projection::Projector;
 pub use thinlens::ThinLens;
 
 use crate::ad::Real;
