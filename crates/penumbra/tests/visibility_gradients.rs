@@ -493,13 +493,11 @@ fn cube_scene() -> String {
     )
 }
 
-/// The welded icosphere of `scenes/meshes` under a directional light over
-/// black, flat-shaded (`face_normals`), translated: its outline and every
-/// edge between two visible faces carry a jump (a convex polyhedron does
-/// not shadow itself, so no shadow edge moves).
-#[test]
-fn flat_shaded_sphere_translation_matches_finite_differences() {
-    let xml = format!(
+/// The welded icosphere of `scenes/meshes` (id `ball`, diffuse) over
+/// black, lit by a directional light shining along `light`, with the
+/// extra shape properties `props`, seen by the 32² test camera.
+fn icosphere_scene(light: &str, props: &str) -> String {
+    format!(
         r#"<scene version="3.0.0">
             <integrator type="direct">
                 <integer name="emitter_samples" value="1"/>
@@ -507,17 +505,28 @@ fn flat_shaded_sphere_translation_matches_finite_differences() {
             </integrator>
             {}
             <emitter type="directional">
-                <vector name="direction" value="-1, -2, -3"/>
+                <vector name="direction" value="{light}"/>
                 <rgb name="irradiance" value="3, 3, 3"/>
             </emitter>
             <shape type="ply" id="ball">
                 <string name="filename" value="meshes/icosphere3.ply"/>
-                <boolean name="face_normals" value="true"/>
+                {props}
                 <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
                 <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
             </shape>
         </scene>"#,
         sensor(32, 4)
+    )
+}
+
+/// The icosphere flat-shaded (`face_normals`), translated: its outline and
+/// every edge between two visible faces carry a jump (a convex polyhedron
+/// does not shadow itself, so no shadow edge moves).
+#[test]
+fn flat_shaded_sphere_translation_matches_finite_differences() {
+    let xml = icosphere_scene(
+        "-1, -2, -3",
+        r#"<boolean name="face_normals" value="true"/>"#,
     );
     let key = "ball.vertex_positions";
     compare_with_finite_differences(
@@ -530,32 +539,14 @@ fn flat_shaded_sphere_translation_matches_finite_differences() {
     );
 }
 
-/// The welded icosphere smooth-shaded with its exact sphere normals, lit
-/// from near the camera (no face shadows a neighbour): its silhouette is
-/// lined by a thin sliver where the view crosses the shading normals'
-/// horizon, whose border moves too; the estimator merges it into the
-/// silhouette's jump (see `diff/primary_boundary.rs`).
+/// The icosphere smooth-shaded with its exact sphere normals, lit from
+/// near the camera (no face shadows a neighbour): its silhouette is lined
+/// by a thin sliver where the view crosses the shading normals' horizon,
+/// whose border moves too; the estimator merges it into the silhouette's
+/// jump (see `diff/primary_boundary.rs`).
 #[test]
 fn smooth_sphere_silhouette_matches_finite_differences() {
-    let xml = format!(
-        r#"<scene version="3.0.0">
-            <integrator type="direct">
-                <integer name="emitter_samples" value="1"/>
-                <integer name="bsdf_samples" value="0"/>
-            </integrator>
-            {}
-            <emitter type="directional">
-                <vector name="direction" value="-0.3, -0.4, -1"/>
-                <rgb name="irradiance" value="3, 3, 3"/>
-            </emitter>
-            <shape type="ply" id="ball">
-                <string name="filename" value="meshes/icosphere3.ply"/>
-                <transform name="to_world"><translate y="-0.6"/><scale value="2"/></transform>
-                <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
-            </shape>
-        </scene>"#,
-        sensor(32, 4)
-    );
+    let xml = icosphere_scene("-0.3, -0.4, -1", "");
     let key = "ball.vertex_positions";
     compare_with_finite_differences(
         "smooth sphere moved",
