@@ -842,3 +842,71 @@ fn reverse_mode_triangle_area_derivative_matches_the_analytic_one() {
         "{mean} ± {se}, analytic {exact}"
     );
 }
+
+/// A receiver (a diffuse square facing the camera), an occluder between it
+/// and a small area light off to the side, direct illumination. `occluder`
+/// and `receiver` are the shapes' transforms.
+fn shadow_scene(size: u32, occluder: &str, receiver: &str, light: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct"/>
+            {sensor}
+            <shape type="rectangle" id="receiver">
+                <transform name="to_world">{receiver}</transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf>
+            </shape>
+            <shape type="rectangle" id="occluder">
+                <transform name="to_world">{occluder}</transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.3, 0.3"/></bsdf>
+            </shape>
+            <shape type="rectangle" id="light">
+                <transform name="to_world">
+                    <scale value="0.25"/>
+                    <lookat origin="{light}" target="0, 0, 0" up="0, 1, 0"/>
+                </transform>
+                <emitter type="area"><rgb name="radiance" value="40, 40, 40"/></emitter>
+            </shape>
+        </scene>"#,
+        sensor = sensor(size, 4)
+    )
+}
+
+/// An occluder moving between an area light and a receiver: its shadow
+/// moves (and its silhouette, seen in front of the receiver).
+#[test]
+fn occluder_between_light_and_receiver_matches_finite_differences() {
+    let key = "occluder.vertex_positions";
+    compare_with_finite_differences(
+        "occluder moved",
+        &shadow_scene(
+            32,
+            r#"<scale value="0.3"/><rotate z="1" angle="25"/><translate x="0.1" y="0.1" z="1"/>"#,
+            r#"<scale value="1.5"/>"#,
+            "1.2, 0.6, 3",
+        ),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.4, 0.0]).unwrap(),
+        0.005,
+        (16, 16),
+    );
+}
+
+/// The same with the occluder and the light outside the view: the whole
+/// derivative is the shadow's boundary term.
+#[test]
+fn shadow_of_an_unseen_occluder_matches_finite_differences() {
+    let key = "occluder.vertex_positions";
+    compare_with_finite_differences(
+        "unseen occluder moved",
+        &shadow_scene(
+            32,
+            r#"<scale value="0.3"/><rotate z="1" angle="25"/><translate x="-1.75" y="0.1" z="1"/>"#,
+            r#"<scale value="2"/>"#,
+            "-3.5, 0.6, 3",
+        ),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.4, 0.0]).unwrap(),
+        0.005,
+        (16, 16),
+    );
+}

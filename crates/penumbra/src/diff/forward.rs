@@ -7,7 +7,7 @@
 //! options, else from the integrator (`sppc`, `sppp`; see
 //! `integrator::Budgets`).
 
-use super::{primary_boundary, warn_missing_boundary_terms};
+use super::{primary_boundary, shadow_boundary, warn_missing_boundary_terms, BoundaryTerms};
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
@@ -32,12 +32,15 @@ pub fn render_forward(
     let opts = &scene.integrator.derivative_options(scene, opts)?;
     let seeds = Seeds::tangents(&scene.params, tangents)?;
     let keys: Vec<&str> = tangents.iter().map(|(k, _)| *k).collect();
-    let primary = primary_boundary::applies(scene, opts)?;
-    let edges_move = warn_missing_boundary_terms(scene, &keys, primary)?;
+    let terms = BoundaryTerms::of(scene, opts)?;
+    let edges_move = warn_missing_boundary_terms(scene, &keys, terms)?;
     let store = scene.params.view(&seeds);
     let mut image = derivative_image(scene, &store, opts)?;
-    if edges_move && primary {
+    if edges_move && terms.primary {
         primary_boundary::add_primary_boundary(scene, &store, opts, &mut image)?;
+    }
+    if edges_move && terms.shadow {
+        shadow_boundary::add_shadow_boundary(scene, &store, opts, &mut image)?;
     }
     Ok(image)
 }

@@ -1,7 +1,7 @@
 //! Derivative estimators: forward (tangent) mode, path-replay reverse mode,
 //! and boundary terms (docs/architecture.md §4): both modes add the
-//! boundary term of primary visibility ([`primary_boundary`]); those of
-//! shadows and indirect visibility are to come. Forward mode gives a
+//! boundary terms of primary visibility ([`primary_boundary`]) and of the
+//! visibility seen from the first vertex, shadows ([`shadow_boundary`]). Forward mode gives a
 //! derivative image for a tangent over the parameters; reverse mode gives
 //! gradients for every differentiable parameter.
 
@@ -9,6 +9,8 @@ mod check;
 mod forward;
 mod prb;
 mod primary_boundary;
+mod shadow_boundary;
+mod splat;
 
 pub use check::{
     check_gradient, perturbation_tangent, translation_tangent, CheckOptions, CheckReport, Estimate,
@@ -16,7 +18,10 @@ pub use check::{
 pub use forward::render_forward;
 pub use prb::{render_backward, GradEntry, Gradients};
 
+use crate::emitter::EmitterT;
 use crate::error::Result;
+use crate::geometry::Shape;
+use crate::integrator::RenderOptions;
 use crate::scene::Scene;
 
 /// The seed of a gradient pass (reverse or forward mode) that follows a
@@ -33,25 +38,43 @@ pub fn gradient_seed(seed: u64) -> u64 {
     seed ^ 0x9e37_79b9
 }
 
+/// The boundary terms a derivative pass estimates.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BoundaryTerms {
+    /// Edges seen by the camera ([`primary_boundary`]).
+    pub primary: bool,
+    /// Edges seen from the first vertex: shadows ([`shadow_boundary`]).
+    pub shadow: bool,
+}
+
+impl BoundaryTerms {
+    /// The terms that apply to the render `opts` describes.
+    pub(crate) fn of(scene: &Scene, opts: &RenderOptions) -> Result<BoundaryTerms> {
+        Ok(BoundaryTerms {
+            primary: primary_boundary::applies(scene, opts)?,
+            shadow: shadow_boundary::applies(scene, opts)?,
+        })
+    }
+}
+
 /// Warns (once per call, naming the keys) when derivatives are requested
 /// for parameters that move visibility discontinuities (vertex positions,
-/// transforms, the camera), naming the boundary terms that the pass does
-/// not estimate, so that the result is biased wherever such an edge
-/// moves. Not an error: the other terms are right, and what users optimise
-/// with today; never silent.
+/// transforms, the camera) and some boundary term those edges need is not
+/// estimated, naming the missing terms: the result is biased wherever
+/// such an edge moves. Not an error: the other terms are right; never
+/// silent.
 ///
-/// `primary`: the pass adds the boundary term of primary visibility at
-/// mesh edges ([`primary_boundary`]). It is complete only if no analytic
-/// shape (sphere, disk) has a silhouette that moves: one of the keys moves
-/// such a shape or the camera. The terms of shadows and of visibility
-/// seen after a bounce are never estimated yet.
+/// Besides a term the pass does not run at all, the estimators leave out:
+/// the silhouettes of analytic shapes (spheres, disks), seen by the camera
+/// or casting shadows; the shadows of point, spot and directional emitters;
+/// and visibility seen from the second and later vertices of a path.
 ///
-/// Returns whether any of them moves a visibility edge (then the boundary
-/// terms apply).
+/// Returns whether any of the keys moves a visibility edge (then the
+/// boundary terms apply).
 pub(crate) fn warn_missing_boundary_terms(
     scene: &Scene,
     keys: &[&str],
-    primary: bool,
+    terms: BoundaryTerms,
 ) -> Result<bool> {
     let mut moving = Vec::new();
     let mut moving_ids = Vec::new();
@@ -71,38 +94,43 @@ pub(crate) fn warn_missing_boundary_terms(
                 .is_some_and(|r| r.starts_with('.'))
         })
     });
+    let analytic = |s: &Shape| s.as_mesh().is_none();
     let analytic_silhouettes_move = scene.shapes.iter().any(|s| {
-        s.as_mesh().is_none()
-            && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
+        analytic(s) && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
     });
-    crate::warn(if primary && !analytic_silhouettes_move {
-        missing_indirect_boundary_terms_message(&moving)
+    let mut missing = Vec::new();
+    if !terms.primary {
+        missing.push("primary visibility (silhouettes seen by the camera)");
+    } else if analytic_silhouettes_move {
+        missing.push("the silhouettes of spheres and disks seen by the camera");
+    }
+    if !terms.shadow {
+        missing.push("shadows");
     } else {
-        missing_boundary_terms_message(&moving)
-    });
+        if scene.emitters.iter().any(|e| e.is_delta()) {
+            missing.push("the shadows of point, spot and directional emitters");
+        }
+        if scene.shapes.iter().any(analytic) {
+            missing.push("the shadows cast by spheres and disks");
+        }
+    }
+    if scene.integrator.traces_indirect_light() {
+        missing.push("indirect visibility (edges seen after a bounce)");
+    }
+    if !missing.is_empty() {
+        crate::warn(missing_boundary_terms_message(&moving, &missing));
+    }
     Ok(true)
 }
 
-/// The warning of [`warn_missing_boundary_terms`] when no boundary term
-/// is estimated (or the primary one only in part).
-pub fn missing_boundary_terms_message(keys: &[&str]) -> String {
+/// The warning of [`warn_missing_boundary_terms`]: `keys` move geometry or
+/// the camera, and the boundary terms of `missing` are not estimated.
+pub fn missing_boundary_terms_message(keys: &[&str], missing: &[&str]) -> String {
     format!(
-        "{} move(s) geometry or the camera: only the interior term of the derivative is \
-         estimated; the boundary terms of primary visibility (silhouettes) and of shadows \
-         are missing, so derivatives are biased where a silhouette or shadow edge moves",
-        keys.join(", ")
-    )
-}
-
-/// The warning of [`warn_missing_boundary_terms`] when the boundary term of
-/// primary visibility is estimated.
-pub fn missing_indirect_boundary_terms_message(keys: &[&str]) -> String {
-    format!(
-        "{} move(s) geometry or the camera: the interior term and the boundary term of \
-         primary visibility (edges seen directly by the camera) are estimated; the boundary \
-         terms of shadows and of edges seen after a bounce (indirect visibility) are missing, \
-         so derivatives are biased where a shadow edge or an edge seen indirectly moves",
-        keys.join(", ")
+        "{} move(s) geometry or the camera: the boundary terms of {} are missing (not \
+         estimated), so derivatives are biased where such an edge moves",
+        keys.join(", "),
+        missing.join(", ")
     )
 }
 

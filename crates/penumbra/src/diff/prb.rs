@@ -21,7 +21,7 @@
 //! The boundary term of primary visibility is added by
 //! `primary_boundary.rs`, which records one edge at a time.
 
-use super::{primary_boundary, warn_missing_boundary_terms};
+use super::{primary_boundary, shadow_boundary, warn_missing_boundary_terms, BoundaryTerms};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
@@ -130,11 +130,11 @@ pub fn render_backward(
             "the image gradient has a non-finite value at index {i}"
         )));
     }
-    let primary = primary_boundary::applies(scene, opts)?;
+    let terms = BoundaryTerms::of(scene, opts)?;
     let mut edges_move = false;
     let ids: Vec<ParamId> = match keys {
         Some(keys) => {
-            edges_move = warn_missing_boundary_terms(scene, keys, primary)?;
+            edges_move = warn_missing_boundary_terms(scene, keys, terms)?;
             keys.iter()
                 .map(|k| scene.params.require(k))
                 .collect::<std::result::Result<_, _>>()?
@@ -155,8 +155,13 @@ pub fn render_backward(
     } else {
         backward_pass(scene, &store, &d_image, opts)?
     };
-    if edges_move && primary {
+    if edges_move && terms.primary {
         non_finite_samples += primary_boundary::add_primary_boundary_gradients(
+            scene, &store, &d_image, opts, &mut sums,
+        )?;
+    }
+    if edges_move && terms.shadow {
+        non_finite_samples += shadow_boundary::add_shadow_boundary_gradients(
             scene, &store, &d_image, opts, &mut sums,
         )?;
     }

@@ -82,24 +82,17 @@
 
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Dual, Real, Var};
-use crate::error::{Error, Result};
+use super::splat::{FilmSplatter, Region, CHUNK};
+use crate::error::Result;
 use crate::geometry::edges::{Edge, EdgeKind, EdgeTable, Eye};
 use crate::geometry::{DiffRay, Mesh, Shape};
-use crate::image::{ImageBlock, ReconstructionFilter};
 use crate::integrator::{RenderOptions, Rendered};
 use crate::math::{DiscreteDistribution, V2, V3};
 use crate::params::ParamView;
 use crate::scene::Scene;
-use crate::sensor::{CameraSample, Sensor};
+use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
-use std::sync::atomic::Ordering;
 
-/// Edge samples drawn from one sample stream key (one parallel task).
-const CHUNK: u32 = 4096;
-/// Chunks computed in parallel before their splats are added to the image
-/// (bounds the memory of the splats in flight).
-const CHUNKS_PER_BATCH: usize = 64;
 /// Sample-stream keys of edge samples: far from the keys of film pixels.
 const STREAM_KEY: u64 = 0xed6e_0000_0000_0000;
 
@@ -190,13 +183,6 @@ impl<M> Segment<M> {
     fn length(&self) -> f32 {
         (self.b - self.a).length() * (self.s1 - self.s0)
     }
-}
-
-/// The film rectangle where samples are taken (crop-window pixels).
-#[derive(Clone, Copy)]
-struct Region {
-    lo: Vec2,
-    hi: Vec2,
 }
 
 /// The film end points (full-film units, in `R`) of the edge `e` of `mesh`
@@ -327,28 +313,6 @@ fn clip(a: Vec2, b: Vec2, region: Region) -> Option<(f32, f32)> {
     (s0 < s1).then_some((s0, s1))
 }
 
-/// `∫_lo^hi k(u) du` of the 1D filter `k` (offsets in pixels), by
-/// Simpson's rule on each side of 0 (the filters are smooth there but for
-/// the tent's kink at 0 and the cut at the radius).
-fn filter_integral(filter: &ReconstructionFilter, lo: f32, hi: f32) -> f64 {
-    let r = filter.radius();
-    let (lo, hi) = (lo.max(-r), hi.min(r));
-    let simpson = |a: f32, b: f32| -> f64 {
-        if !(b > a) {
-            return 0.0;
-        }
-        const N: usize = 64;
-        let h = (b - a) as f64 / N as f64;
-        let f = |i: usize| filter.eval((a as f64 + h * i as f64) as f32) as f64;
-        let mut s = f(0) + f(N);
-        for i in 1..N {
-            s += f(i) * if i % 2 == 1 { 4.0 } else { 2.0 };
-        }
-        s * h / 3.0
-    };
-    simpson(lo, hi.min(0.0)) + simpson(lo.max(0.0), hi)
-}
-
 /// The closest point of the line through `p0`, `p1` to the ray, as a
 /// distance along the ray (`None` if they are parallel).
 fn distance_along(o: Vec3, d: Vec3, p0: Vec3, p1: Vec3) -> Option<f32> {
@@ -427,7 +391,7 @@ pub(crate) fn add_primary_boundary_gradients(
         clear_tape();
         let projected = scene.shapes[seg.shape as usize].as_mesh().and_then(|mesh| {
             project_edge::<Var>(
-                ctx.sensor,
+                ctx.film.sensor,
                 store,
                 mesh,
                 &mesh.edges.edges[seg.edge as usize],
@@ -437,7 +401,7 @@ pub(crate) fn add_primary_boundary_gradients(
             continue;
         };
         // ⟨to_pixels(f), n⟩ up to a constant
-        let n = seg.n * ctx.scale;
+        let n = seg.n * ctx.film.scale;
         let normal = |f: V2<Var>| f.x * n.x + f.y * n.y;
         backward(
             &[(normal(f0), wa as f32), (normal(f1), wb as f32)],
@@ -461,24 +425,14 @@ struct Splat {
 /// per-pixel normalisation of the splats.
 struct Context<'a, M> {
     scene: &'a Scene,
-    sensor: &'a Sensor,
+    film: FilmSplatter<'a>,
     segs: Vec<Segment<M>>,
     dist: DiscreteDistribution,
     /// Total projected length (pixels): the inverse of the density.
     total: f32,
     /// Offset (pixels) from the edge to either side.
     eps: f32,
-    crop_off: Vec2,
-    inv_size: Vec2,
-    /// Film units to pixels.
-    scale: Vec2,
     seed: u64,
-    n_samples: u64,
-    /// Crop-window width, and the filter integrals `Wx(i)`, `Wy(j)` with
-    /// `W_p = Wx(i) · Wy(j)` (separable filter, rectangular region).
-    width: usize,
-    wx: Vec<f64>,
-    wy: Vec<f64>,
 }
 
 impl<'a, M: Sync> Context<'a, M> {
@@ -494,122 +448,55 @@ impl<'a, M: Sync> Context<'a, M> {
         let Some(proj) = sensor.projector::<f32>(store) else {
             return Ok(None);
         };
-        let film = &sensor.film;
-        let (cw, ch) = film.crop_size;
-        let border = if film.sample_border {
-            film.rfilter.border() as f32
-        } else {
-            0.0
-        };
-        let region = Region {
-            lo: Vec2::splat(-border),
-            hi: Vec2::new(cw as f32 + border, ch as f32 + border),
-        };
-        let size = Vec2::new(film.width as f32, film.height as f32);
-        let crop_off = Vec2::new(film.crop_offset.0 as f32, film.crop_offset.1 as f32);
-        let to_pixels = |f: Vec2| f * size - crop_off;
-        let segs = segments::<R>(scene, sensor, store, proj.eye(), &to_pixels, region, size);
+        let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
+        let film = FilmSplatter::new(sensor, opts.sppp.unwrap_or(spp), opts)?;
+        let to_pixels = |f: Vec2| film.to_pixels(f);
+        let segs = segments::<R>(
+            scene,
+            sensor,
+            store,
+            proj.eye(),
+            &to_pixels,
+            film.region,
+            film.scale,
+        );
         let lengths: Vec<f32> = segs.iter().map(Segment::length).collect();
         let Some(dist) = DiscreteDistribution::new(&lengths) else {
             return Ok(None);
         };
-        let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
-        let sppp = opts.sppp.unwrap_or(spp) as u64;
-        let filter = &film.rfilter;
-        let integrals = |n: usize, lo: f32, hi: f32| -> Vec<f64> {
-            (0..n)
-                .map(|i| filter_integral(filter, lo - i as f32 - 0.5, hi - i as f32 - 0.5))
-                .collect()
-        };
         Ok(Some(Context {
             scene,
-            sensor,
             segs,
             total: dist.sum() as f32,
             dist,
-            eps: 1e-3 * (size.max_element() / 1000.0).max(1.0),
-            crop_off,
-            inv_size: size.recip(),
-            scale: size,
+            eps: 1e-3 * (film.scale.max_element() / 1000.0).max(1.0),
             seed: opts.seed,
-            n_samples: sppp * (cw * ch) as u64,
-            width: cw,
-            wx: integrals(cw, region.lo.x, region.hi.x),
-            wy: integrals(ch, region.lo.y, region.hi.y),
+            film,
         }))
     }
 
     /// Draws the `sppp × pixels` edge samples and calls `visit(segment,
     /// sample, pixel, weight)` for every pixel p (index in the crop window)
     /// the filter reaches from every non-zero sample, with weight
-    /// `k_p(x) / (W_p · samples)`, in a fixed order: samples are computed
-    /// in chunks in parallel and visited in chunk order, so the result is
-    /// the same for a seed whatever the number of threads. Returns the
-    /// number of non-finite samples left out (and warns about them).
+    /// `k_p(x) / (W_p · samples)`, in a fixed order (see
+    /// [`FilmSplatter::run`]). Returns the number of non-finite samples
+    /// left out (and warns about them).
     fn run(
         &self,
         opts: &RenderOptions,
         mut visit: impl FnMut(&Segment<M>, &Splat, usize, f64),
     ) -> Result<usize> {
-        let n_chunks = self.n_samples.div_ceil(CHUNK as u64) as usize;
-        let filter = &self.sensor.film.rfilter;
-        let bounds = ImageBlock::new(0, 0, self.wx.len(), self.wy.len(), 0);
-        let n = self.n_samples as f64;
-        let mut non_finite = 0usize;
-        let run = |chunks: std::ops::Range<usize>| -> Vec<Option<(Vec<Splat>, usize)>> {
-            chunks
-                .into_par_iter()
-                .map(|c| {
-                    if opts
-                        .cancel
-                        .as_ref()
-                        .is_some_and(|c| c.load(Ordering::Relaxed))
-                    {
-                        return None;
-                    }
-                    Some(self.chunk(c))
-                })
-                .collect()
-        };
-        let pool = match opts.threads {
-            Some(n) => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n.max(1))
-                    .build()
-                    .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?,
-            ),
-            None => None,
-        };
-        for first in (0..n_chunks).step_by(CHUNKS_PER_BATCH) {
-            let chunks = first..(first + CHUNKS_PER_BATCH).min(n_chunks);
-            let results = match &pool {
-                Some(p) => p.install(|| run(chunks)),
-                None => run(chunks),
-            };
-            for r in results {
-                let (splats, bad) = r.ok_or(Error::Interrupted)?;
-                non_finite += bad;
-                for s in splats {
+        self.film.run(
+            opts,
+            "primary visibility boundary term",
+            |c, count| self.chunk(c, count),
+            |batch| {
+                for s in batch.iter().flatten() {
                     let seg = &self.segs[s.seg as usize];
-                    bounds.footprint(filter, s.x.x, s.x.y, |i, j, w| {
-                        let (i, j) = (i as usize, j as usize);
-                        visit(
-                            seg,
-                            &s,
-                            j * self.width + i,
-                            w / (self.wx[i] * self.wy[j] * n),
-                        );
-                    });
+                    self.film.footprint(s.x, |p, w| visit(seg, s, p, w));
                 }
-            }
-        }
-        if non_finite > 0 {
-            crate::warn(format!(
-                "primary visibility boundary term: {non_finite} edge sample(s) had a NaN or \
-                 infinite value and were left out"
-            ));
-        }
-        Ok(non_finite)
+            },
+        )
     }
 
     /// The film position `eps` from `x` towards `dir` (a unit vector) or,
@@ -639,6 +526,7 @@ impl<'a, M: Sync> Context<'a, M> {
                 return xs;
             }
             let ray = self
+                .film
                 .camera_sample(xs)
                 .ray::<f32>(&scene.params.primal())
                 .val();
@@ -659,23 +547,14 @@ impl<'a, M: Sync> Context<'a, M> {
         }
     }
 
-    fn camera_sample(&self, x: Vec2) -> CameraSample<'_> {
-        CameraSample {
-            sensor: self.sensor,
-            film: (x + self.crop_off) * self.inv_size,
-            lens: Vec2::ZERO,
-        }
-    }
-
     /// The non-zero splats of chunk `c` and the number of non-finite ones.
-    fn chunk(&self, c: usize) -> (Vec<Splat>, usize) {
+    fn chunk(&self, c: usize, count: u32) -> (Vec<Splat>, usize) {
         let scene = self.scene;
-        let first = c as u64 * CHUNK as u64;
-        let count = (self.n_samples - first).min(CHUNK as u64) as u32;
         let mut out = Vec::new();
         let mut non_finite = 0;
         for k in 0..count {
             let mut rng = self
+                .film
                 .sensor
                 .sampler
                 .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
@@ -691,6 +570,7 @@ impl<'a, M: Sync> Context<'a, M> {
             let (x, n) = (seg.a + (seg.b - seg.a) * s, seg.n);
             // the edge must be what the camera sees at x
             let ray = self
+                .film
                 .camera_sample(x)
                 .ray::<f32>(&scene.params.primal())
                 .val();
@@ -703,7 +583,7 @@ impl<'a, M: Sync> Context<'a, M> {
                 }
             }
             let radiance = |side: f32| {
-                let cs = self.camera_sample(self.beyond_horizon(
+                let cs = self.film.camera_sample(self.beyond_horizon(
                     x,
                     n * side,
                     seg.smooth.then_some(seg.shape),
@@ -736,30 +616,6 @@ impl<'a, M: Sync> Context<'a, M> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn filter_integrals() {
-        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
-        let bx = ReconstructionFilter::Box;
-        assert!(close(filter_integral(&bx, -10.0, 10.0), 1.0));
-        assert!(close(filter_integral(&bx, 0.0, 10.0), 0.5));
-        assert!(close(filter_integral(&bx, -0.2, 0.1), 0.3));
-        let tent = ReconstructionFilter::Tent { radius: 1.0 };
-        assert!(close(filter_integral(&tent, -5.0, 5.0), 1.0));
-        assert!(close(filter_integral(&tent, 0.5, 5.0), 0.125));
-        let g = ReconstructionFilter::Gaussian {
-            stddev: 0.5,
-            radius: 2.0,
-        };
-        // a fine midpoint sum
-        let n = 200_000;
-        let sum: f64 = (0..n)
-            .map(|i| g.eval(-0.7 + 2.0 * (i as f32 + 0.5) / n as f32) as f64)
-            .sum::<f64>()
-            * 2.0
-            / n as f64;
-        assert!((filter_integral(&g, -0.7, 1.3) - sum).abs() < 1e-5);
-    }
 
     #[test]
     fn clipping_to_the_film() {

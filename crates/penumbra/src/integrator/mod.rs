@@ -15,6 +15,7 @@ pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
 use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
+use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::Spectrum;
@@ -137,6 +138,48 @@ impl Integrator {
             Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
             Integrator::Aov(_) => None,
         }
+    }
+}
+
+impl Integrator {
+    /// The radiance that reaches a first vertex (one the camera sees)
+    /// along `ray`, as this integrator's estimate at that vertex counts it,
+    /// primal: the emission of what the ray reaches, with its whole weight
+    /// (the MIS weights of the strategies that find it add up to one), and
+    /// with path tracing beyond depth 2 the rest of the path from there.
+    /// The boundary term of the first vertex's visibility measures its
+    /// jump across the edges seen from that vertex.
+    pub(crate) fn incident_radiance(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        rng: &mut SampleStream,
+    ) -> glam::Vec3 {
+        let store = scene.params.primal();
+        match self {
+            Integrator::Path(p) => p.trace::<f32>(scene, &store, DiffRay::cst(ray), 1, rng).val(),
+            Integrator::Direct(_) => match scene.intersect(ray) {
+                Some(hit) => match scene.shape_emitter(hit.shape) {
+                    Some(em) => {
+                        let si = scene.surface_interaction::<f32>(&store, &DiffRay::cst(ray), &hit);
+                        scene.emitters[em as usize].eval_surface(&store, &si).val()
+                    }
+                    None => glam::Vec3::ZERO,
+                },
+                None => scene.environment.map_or(glam::Vec3::ZERO, |env| {
+                    scene.emitters[env as usize]
+                        .eval_environment::<f32>(&store, V3::cst(ray.d))
+                        .val()
+                }),
+            },
+            Integrator::Aov(_) => glam::Vec3::ZERO,
+        }
+    }
+
+    /// Whether the radiance a first vertex receives includes light that
+    /// bounced off other surfaces (path tracing beyond depth 2).
+    pub(crate) fn traces_indirect_light(&self) -> bool {
+        matches!(self, Integrator::Path(p) if p.max_depth > 2)
     }
 }
 

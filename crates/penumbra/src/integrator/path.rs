@@ -9,6 +9,7 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
+use crate::geometry::DiffRay;
 use crate::math::Spectrum;
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
@@ -60,7 +61,22 @@ impl PathIntegrator {
         cs: &CameraSample,
         rng: &mut SampleStream,
     ) -> Spectrum<R> {
-        let camera_ray = cs.ray_if_moving::<R>(store);
+        self.trace(scene, store, cs.ray_if_moving::<R>(store), 0, rng)
+    }
+
+    /// The radiance arriving along `camera_ray`, whose end is a vertex of
+    /// depth `depth` (0: the first one the camera sees), estimated by
+    /// continuing the path from there;
+    /// what it reaches first counts with its whole emission (as after a
+    /// delta bounce: no MIS with the vertex the ray leaves).
+    pub(crate) fn trace<R: Real>(
+        &self,
+        scene: &Scene,
+        store: &ParamView,
+        camera_ray: DiffRay<R>,
+        mut depth: u32,
+        rng: &mut SampleStream,
+    ) -> Spectrum<R> {
         let mut result = Spectrum::<R>::zero();
         let mut throughput = Spectrum::<R>::splat(R::cst(1.0));
         let mut eta = 1.0f32;
@@ -74,7 +90,6 @@ impl PathIntegrator {
         let mut prev_delta = true;
         let mut hit = scene.intersect(&ray);
         let mut vertex = hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h));
-        let mut depth = 0u32;
         // the BSDF at the current vertex, its textures read once for all
         // its uses there; set in place at each vertex
         let mut bsdf_ctx = BsdfContext::empty();

@@ -28,6 +28,11 @@ pub struct RenderOptions {
     /// primary visibility (Mitsuba's `sppp`: `sppp × pixels` samples on the
     /// edges), default: `spp`; 0 turns the term off.
     pub sppp: Option<u32>,
+    /// Derivative passes: samples per pixel of the boundary term of the
+    /// visibility seen from the first vertex: shadows, and with path
+    /// tracing beyond depth 2 every edge seen from there (Mitsuba's
+    /// `sppi`), default: `spp`; 0 turns the term off.
+    pub sppi: Option<u32>,
     /// Seed of all random numbers (combined with the sampler's own seed).
     pub seed: u64,
     /// Which of the scene's sensors to render (default: the first).

@@ -4,7 +4,7 @@
 
 mod orthographic;
 mod perspective;
-mod projection;
+pub(crate) mod projection;
 mod thinlens;
 
 pub use orthographic::Orthographic;
