@@ -65,8 +65,9 @@ fn spp_parser() -> clap::builder::RangedI64ValueParser<u32> {
     clap::value_parser!(u32).range(1..)
 }
 
-/// `--sppp`: edge samples per pixel of the boundary term of primary
-/// visibility, 0 turning it off (the integrator's `sppp`, else the pass's
+/// `--sppp`, `--sppi`: samples per pixel of the boundary terms of primary
+/// visibility and of the visibility seen from the first vertex (shadows),
+/// 0 turning a term off (the integrator's `sppp` / `sppi`, else the pass's
 /// samples per pixel, when not given).
 #[derive(Args)]
 struct BudgetArgs {
@@ -77,6 +78,11 @@ struct BudgetArgs {
     // naming the option rather than taken for a flag
     #[arg(long, value_name = "N", allow_negative_numbers = true)]
     sppp: Option<u32>,
+    /// Samples per pixel of the boundary term of the visibility seen from
+    /// the first vertex (shadows) in the derivative passes; 0 turns the term
+    /// off [default: the integrator's sppi, else the samples per pixel].
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    sppi: Option<u32>,
 }
 
 /// `--translate`: three comma-separated numbers.
@@ -399,6 +405,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 let opts = RenderOptions {
                     spp,
                     sppp: budgets.sppp,
+                    sppi: budgets.sppi,
                     seed: seed + i as u64,
                     threads: run.threads,
                     force: run.force,
@@ -556,6 +563,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 let opts = CheckOptions {
                     spp,
                     sppp: budgets.sppp,
+                    sppi: budgets.sppi,
                     batches,
                     eps,
                     tangent,

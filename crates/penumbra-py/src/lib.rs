@@ -267,7 +267,7 @@ fn with_integrator<T>(
 
 fn options(
     spp: Option<u32>,
-    sppp: Option<u32>,
+    (sppp, sppi): (Option<u32>, Option<u32>),
     seed: u64,
     sensor: usize,
     threads: Option<usize>,
@@ -276,6 +276,7 @@ fn options(
     RenderOptions {
         spp,
         sppp,
+        sppi,
         seed,
         sensor,
         threads,
@@ -418,7 +419,7 @@ impl PyScene {
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let progress = Progress::from_arg(progress, "render")?;
         refresh(&mut self.inner)?;
-        let opts = options(spp, None, seed, sensor, threads, force);
+        let opts = options(spp, (None, None), seed, sensor, threads, force);
         let r = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             let scene = &*scene;
             run_detached(py, opts, &progress, |o| render(scene, o))
@@ -428,7 +429,7 @@ impl PyScene {
 
     /// Forward mode: the derivative image along the given tangents
     /// (`[(key, flat float32 array)]`), `(height, width, 3)`.
-    #[pyo3(signature = (tangents, spp=None, sppp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
+    #[pyo3(signature = (tangents, spp=None, sppp=None, sppi=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
     #[allow(clippy::too_many_arguments)]
     fn render_forward<'py>(
         &mut self,
@@ -436,6 +437,7 @@ impl PyScene {
         tangents: Vec<(String, PyReadonlyArrayDyn<'py, f32>)>,
         spp: Option<u32>,
         sppp: Option<u32>,
+        sppi: Option<u32>,
         seed: u64,
         sensor: usize,
         integrator: Option<PyRef<'_, PyIntegrator>>,
@@ -450,7 +452,7 @@ impl PyScene {
             owned.push((k.clone(), to_vec(a)));
         }
         refresh(&mut self.inner)?;
-        let opts = options(spp, sppp, seed, sensor, threads, force);
+        let opts = options(spp, (sppp, sppi), seed, sensor, threads, force);
         let r = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             run_detached(py, opts, &progress, |o| {
                 let t: Vec<(&str, &[f32])> = owned
@@ -466,7 +468,7 @@ impl PyScene {
     /// Reverse mode (path replay): gradients `{key: array}` of a loss whose
     /// derivative with respect to the image is `d_image` (height × width ×
     /// 3). `seed` is the gradient pass's own seed, used as given.
-    #[pyo3(signature = (d_image, keys=None, spp=None, sppp=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
+    #[pyo3(signature = (d_image, keys=None, spp=None, sppp=None, sppi=None, seed=0, sensor=0, integrator=None, progress=None, threads=None, force=false))]
     #[allow(clippy::too_many_arguments)]
     fn render_backward<'py>(
         &mut self,
@@ -475,6 +477,7 @@ impl PyScene {
         keys: Option<Vec<String>>,
         spp: Option<u32>,
         sppp: Option<u32>,
+        sppi: Option<u32>,
         seed: u64,
         sensor: usize,
         integrator: Option<PyRef<'_, PyIntegrator>>,
@@ -490,7 +493,7 @@ impl PyScene {
         }
         let d = to_vec(&d_image);
         refresh(&mut self.inner)?;
-        let opts = options(spp, sppp, seed, sensor, threads, force);
+        let opts = options(spp, (sppp, sppi), seed, sensor, threads, force);
         let grads = with_integrator(&mut self.inner, integrator.as_deref(), |scene| {
             run_detached(py, opts, &progress, |o| {
                 let k: Option<Vec<&str>> = keys

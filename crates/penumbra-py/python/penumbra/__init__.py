@@ -191,15 +191,23 @@ def _spp(spp):
     return int(spp)
 
 
-def _sppp(sppp):
-    if sppp is None:
-        return None  # the integrator's sppp, else the pass's spp
-    if not isinstance(sppp, (int, np.integer)) or isinstance(sppp, bool) or sppp < 0:
+def _budget(value, name, term):
+    if value is None:
+        return None  # the integrator's budget, else the pass's spp
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 0:
         raise ValueError(
-            f"sppp must be a non-negative integer (0 turns the boundary term of primary "
-            f"visibility off), got {sppp!r}"
+            f"{name} must be a non-negative integer (0 turns the boundary term of {term} "
+            f"off), got {value!r}"
         )
-    return int(sppp)
+    return int(value)
+
+
+def _sppp(sppp):
+    return _budget(sppp, "sppp", "primary visibility")
+
+
+def _sppi(sppi):
+    return _budget(sppi, "sppi", "the visibility seen from the first vertex (shadows)")
 
 
 def _seed(seed):
@@ -301,15 +309,18 @@ def render_forward(
     threads=None,
     force=False,
     sppp=None,
+    sppi=None,
 ) -> np.ndarray:
     """Forward-mode derivative: the image ``dI/dθ · t`` (``(H, W, 3)``
     float32) along the tangent ``t`` given as ``{key: array shaped like the
     parameter}``; parameters not listed have zero tangent.
 
-    ``spp`` (interior term) and ``sppp`` (edge samples per pixel of the
-    boundary term of primary visibility, 0: off) override the integrator's
-    ``sppc`` and ``sppp``; without either, the integrator's budgets apply,
-    else the scene sampler's sample count."""
+    ``spp`` (interior term), ``sppp`` (edge samples per pixel of the
+    boundary term of primary visibility, 0: off) and ``sppi`` (samples per
+    pixel of the boundary term of the visibility seen from the first
+    vertex: shadows; 0: off) override the integrator's ``sppc``, ``sppp``
+    and ``sppi``; without them, the integrator's budgets apply, else the
+    scene sampler's sample count."""
     _check_scene(scene)
     if not hasattr(tangents, "items"):
         raise TypeError(f"tangents must be a dict {{key: array}}, got {type(tangents).__name__}")
@@ -322,6 +333,7 @@ def render_forward(
     return scene.render_forward(
         ts,
         sppp=_sppp(sppp),
+        sppi=_sppi(sppi),
         **_render_options(spp, seed, sensor, integrator, progress, threads, force),
     )
 
@@ -339,6 +351,7 @@ def render_backward(
     seed_grad=None,
     force=False,
     sppp=None,
+    sppi=None,
 ) -> dict:
     """Reverse-mode derivative (path replay): given ``d_image`` =
     ∂loss/∂image of the image rendered with ``seed`` (``(H, W, 3)``, or
@@ -353,9 +366,9 @@ def render_backward(
     so that the gradient of a non-linear loss is unbiased. ``seed_grad=seed``
     gives the exact derivative of the rendered estimate instead.
 
-    ``spp`` and ``sppp`` override the integrator's ``sppc`` and ``sppp`` as
-    in :func:`render_forward` (reverse mode estimates no boundary term
-    yet)."""
+    ``spp``, ``sppp`` and ``sppi`` override the integrator's ``sppc``,
+    ``sppp`` and ``sppi`` as in :func:`render_forward`; both modes take the
+    same boundary samples."""
     _check_scene(scene)
     a = _adjoint(scene, d_image, _sensor(sensor))
     if keys is not None:
@@ -368,6 +381,7 @@ def render_backward(
         a,
         keys=keys,
         sppp=_sppp(sppp),
+        sppi=_sppi(sppi),
         **_render_options(spp, seed_grad, sensor, integrator, progress, threads, force),
     )
 

@@ -31,6 +31,7 @@ from . import (
     _seed,
     _sensor,
     _spp,
+    _sppi,
     _sppp,
     as_float_array,
     gradient_seed,
@@ -90,6 +91,7 @@ class RenderFunction(torch.autograd.Function):
             keys=need,
             spp=o["spp_grad"],
             sppp=o["sppp"],
+            sppi=o["sppi"],
             seed=o["seed_grad"],
             sensor=o["sensor"],
             integrator=o["integrator"],
@@ -142,6 +144,7 @@ def render(
     sensor=0,
     progress=False,
     sppp=None,
+    sppi=None,
 ) -> torch.Tensor:
     """Renders ``scene`` with the parameter values ``params`` = ``{key:
     tensor}`` and returns the image ``(H, W, C)`` as a tensor through which
@@ -149,9 +152,9 @@ def render(
     else float32). ``spp_grad`` (default ``spp``) and ``seed_grad``
     (default :func:`penumbra.gradient_seed` ``(seed)``) set the backward
     pass's samples; ``seed_grad=seed`` (and equal spp) makes the gradient
-    the exact derivative of the rendered estimate. ``sppp`` is the
-    backward pass's budget of the boundary term of primary visibility (see
-    :func:`penumbra.render_forward`)."""
+    the exact derivative of the rendered estimate. ``sppp`` and ``sppi`` are
+    the backward pass's budgets of the boundary terms of primary visibility
+    and of shadows (see :func:`penumbra.render_forward`)."""
     if not isinstance(scene, Scene):
         raise TypeError(f"expected a penumbra Scene, got {type(scene).__name__}")
     params = {} if params is None else params
@@ -182,6 +185,7 @@ def render(
         spp_grad=_spp(spp_grad if spp_grad is not None else spp),
         seed_grad=gradient_seed(seed) if seed_grad is None else _seed(seed_grad),
         sppp=_sppp(sppp),
+        sppi=_sppi(sppi),
         sensor=_sensor(sensor),
         integrator=_integrator(integrator),
         progress=progress,

@@ -55,6 +55,10 @@ pub struct CheckOptions {
     /// in the derivative passes ([`RenderOptions::sppp`]; default: the
     /// integrator's `sppp`, else `spp`).
     pub sppp: Option<u32>,
+    /// Samples per pixel of the boundary term of the visibility seen from
+    /// the first vertex ([`RenderOptions::sppi`]; default: the
+    /// integrator's `sppi`, else `spp`).
+    pub sppi: Option<u32>,
     /// Independent batches (different seeds) for the error bars.
     pub batches: u32,
     /// Relative step of the finite differences.
@@ -76,6 +80,7 @@ impl Default for CheckOptions {
         CheckOptions {
             spp: 16,
             sppp: None,
+            sppi: None,
             batches: 4,
             eps: 1e-2,
             threads: None,
@@ -188,6 +193,7 @@ pub fn check_gradient(scene: &mut Scene, key: &str, opts: &CheckOptions) -> Resu
             let ro = RenderOptions {
                 spp: Some(opts.spp),
                 sppp: opts.sppp,
+                sppi: opts.sppi,
                 seed: 1000 + b as u64,
                 threads: opts.threads,
                 force: opts.force,

@@ -22,6 +22,9 @@
 //! sppp = 16                          # optional: edge samples per pixel of
 //!                                    # the primary-visibility boundary
 //!                                    # term (default: the integrator's)
+//! sppi = 16                          # optional: samples per pixel of the
+//!                                    # shadow boundary term (default:
+//!                                    # the integrator's)
 //! loss = "l2"                        # l1 | l2 | rel_l2
 //! optimizer = { method = "adam" }    # or { method = "sgd", momentum = 0.9 }
 //! target = { render_spp = 256 }      # or { images = ["target.exr"] }
@@ -85,6 +88,10 @@ pub struct JobFile {
     /// in the gradient passes ([`RenderOptions::sppp`]; default: the
     /// integrator's `sppp`, else `spp`).
     pub sppp: Option<u32>,
+    /// Samples per pixel of the boundary term of the visibility seen from
+    /// the first vertex, shadows ([`RenderOptions::sppi`]; default: the
+    /// integrator's `sppi`, else `spp`).
+    pub sppi: Option<u32>,
     #[serde(default = "default_loss")]
     pub loss: String,
     #[serde(default)]
@@ -437,6 +444,7 @@ impl Job {
                 let ro_grad = RenderOptions {
                     seed: crate::diff::gradient_seed(ro.seed),
                     sppp: spec.sppp,
+                    sppi: spec.sppi,
                     ..ro.clone()
                 };
                 let g = render_backward(scene, &d_img, Some(&keys), &ro_grad)?;
