@@ -670,9 +670,11 @@ fn degenerate_and_intersecting_triangles_give_finite_derivatives() {
     }
 }
 
-/// The warning no longer names primary visibility when its term is
-/// estimated (forward and reverse mode, meshes); it still names shadows
-/// and indirect visibility.
+/// The warning names only the boundary terms that are missing: none for
+/// meshes seen directly and lit by area or environment emitters (the
+/// primary and shadow terms are estimated), indirect visibility for a path
+/// tracer beyond depth 2, the shadows of a point light (forward and
+/// reverse mode alike).
 #[test]
 fn warnings_name_only_the_missing_terms() {
     let seen = Arc::new(Mutex::new(Vec::<String>::new()));
@@ -680,21 +682,47 @@ fn warnings_name_only_the_missing_terms() {
     penumbra::warn::set_warning_sink(Some(Arc::new(move |m: &str| {
         sink.lock().unwrap().push(m.to_string())
     })));
-    let scene = load(&rectangle_scene(8));
     let key = "rect.vertex_positions";
-    let t = translation_tangent(&scene, key, [1.0, 0.0, 0.0]).unwrap();
-    let d = render_forward(&scene, &[(key, &t)], &opts(1, 1, 1)).unwrap();
-    let ones = vec![1.0f32; d.data.len()];
-    render_backward(&scene, &ones, Some(&[key]), &opts(1, 1, 1)).unwrap();
-    penumbra::warn::set_warning_sink(None);
-    let seen = seen.lock().unwrap();
-    let ours: Vec<&String> = seen.iter().filter(|m| m.starts_with(key)).collect();
-    assert_eq!(ours.len(), 2, "{seen:?}");
-    for m in ours {
-        assert!(m.contains("boundary term of primary visibility"), "{m}");
-        assert!(m.contains("shadows") && m.contains("indirect"), "{m}");
+    let run = |xml: &str| {
+        let scene = load(xml);
+        let t = translation_tangent(&scene, key, [1.0, 0.0, 0.0]).unwrap();
+        let d = render_forward(&scene, &[(key, &t)], &opts(1, 1, 1)).unwrap();
+        let ones = vec![1.0f32; d.data.len()];
+        render_backward(&scene, &ones, Some(&[key]), &opts(1, 1, 1)).unwrap();
+    };
+    let ours = |seen: &Arc<Mutex<Vec<String>>>| -> Vec<String> {
+        let mut seen = seen.lock().unwrap();
+        let ours = seen.iter().filter(|m| m.starts_with(key)).cloned().collect();
+        seen.clear();
+        ours
+    };
+    let scene = rectangle_scene(8);
+    run(&scene);
+    assert_eq!(ours(&seen), Vec::<String>::new());
+    let path = r#"<integrator type="path"><integer name="max_depth" value="4"/></integrator>"#;
+    let direct = scene[scene.find("<integrator").unwrap()..]
+        .split("</integrator>")
+        .next()
+        .unwrap()
+        .to_string()
+        + "</integrator>";
+    run(&scene.replace(&direct, path));
+    let point = r#"<emitter type="point"><point name="position" x="0" y="3" z="3"/></emitter>"#;
+    run(&scene.replace("<shape", &format!("{point}<shape")));
+    // one from forward mode, one from reverse mode
+    let messages = ours(&seen);
+    assert_eq!(messages.len(), 4, "{messages:?}");
+    assert!(messages[0] == messages[1] && messages[2] == messages[3]);
+    let messages = [&messages[0], &messages[2]];
+    for m in &messages {
         assert!(m.contains("are missing"), "{m}");
+        assert!(!m.contains("primary visibility"), "{m}");
     }
+    assert!(messages[0].contains("indirect visibility"), "{}", messages[0]);
+    assert!(!messages[0].contains("shadows"), "{}", messages[0]);
+    assert!(messages[1].contains("shadows of point"), "{}", messages[1]);
+    assert!(!messages[1].contains("indirect"), "{}", messages[1]);
+    penumbra::warn::set_warning_sink(None);
 }
 
 /// Uniform pseudo-random numbers in [−1, 1) (a fixed LCG: the test's
