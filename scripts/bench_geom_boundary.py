@@ -64,10 +64,13 @@ Set-up (once per machine), then run from anywhere:
 --mitsuba-python (or $PENUMBRA_MITSUBA_PYTHON) points at the venv's python
 when it is not at the default place; the script stops with a message
 saying how to install it if it is missing. With the defaults the run took
-about 13 minutes on 2 cores shared with other builds, two thirds of it the
-one Mitsuba `direct_projective` process (JIT compilation, then minutes of
-kernel execution at 2.6 GB); `--mitsuba-calls 0` saves its warm call,
-`--mitsuba direct_projective_sppi0` skips it.
+15.5 minutes on 2 cores shared with other builds (load average 4–5), two
+thirds of it the one Mitsuba `direct_projective` process (kernel
+compilation, then minutes of kernel execution at 2.6 GB);
+`--mitsuba-calls 0` saves its warm call (about 5 of those minutes),
+`--mitsuba direct_projective_sppi0` skips it. `--from-json
+out/bench_geom/results.json` re-makes the tables of a finished run
+without running anything.
 """
 import argparse
 import datetime
@@ -267,32 +270,43 @@ def run_penumbra(a, scenes, integ, spp, rep):
     return r
 
 
-def penumbra_errors(a, env, runs):
-    """rel_l2 of Penumbra's images against the FD reference, in one process of
-    the Mitsuba venv (EXR reading; compare.py's metric)."""
-    todo = [r for r in runs if r['side'] == 'penumbra' and 'error' not in r]
+MI_REFS = {  # Mitsuba's own 384-spp estimates, bundled (scenes/refs/index.json)
+    'vs_mi_dp': os.path.join(ROOT, 'scenes', 'refs', 'geom_dimg_dx_direct_projective.exr'),
+    'vs_mi_sppi0': os.path.join(ROOT, 'scenes', 'refs', 'geom_dimg_dx_direct_projective_sppi0.exr'),
+}
+
+
+def image_errors(mitsuba_python, env, runs):
+    """For the saved (first-call) image of every run: rel_l2 against the FD
+    reference (Penumbra's rel_l2; Mitsuba's worker measured every call
+    itself) and against Mitsuba's 384-spp direct_projective images, in one
+    process of the Mitsuba venv (EXR reading; compare.py's metric)."""
+    todo = [r for r in runs if 'error' not in r]
     if not todo:
         return
     code = ('import json, sys, numpy as np\n'
             f'sys.path.insert(0, {os.path.join(HERE, "mitsuba")!r})\n'
             'import compare\n'
-            'ref = compare.read(sys.argv[1])\n'
+            'refs = [compare.read(p) for p in sys.argv[1:4]]\n'
             'out = []\n'
-            'for p in sys.argv[2:]:\n'
+            'for p in sys.argv[4:]:\n'
             '    x = compare.read(p)\n'
-            '    out.append([compare.rel_l2(x, ref), float(np.abs(x).sum()), '
-            'bool(np.isfinite(x).all())] if x.shape == ref.shape else None)\n'
+            '    out.append([compare.rel_l2(x, r) for r in refs] + [float(np.abs(x).sum()), '
+            'bool(np.isfinite(x).all())] if x.shape == refs[0].shape else None)\n'
             'print(json.dumps(out))\n')
-    p = subprocess.run([a.mitsuba_python, '-c', code, FD_REF] +
-                       [os.path.join(ROOT, r['image']) for r in todo],
+    p = subprocess.run([mitsuba_python, '-c', code, FD_REF, MI_REFS['vs_mi_dp'],
+                        MI_REFS['vs_mi_sppi0']] + [os.path.join(ROOT, r['image']) for r in todo],
                        capture_output=True, text=True, env=env, cwd=ROOT)
     if p.returncode:
-        die(f'reading Penumbra\'s images failed:\n{p.stderr[-2000:]}')
+        die(f'reading the derivative images failed:\n{p.stderr[-2000:]}')
     for r, v in zip(todo, json.loads(p.stdout.strip().splitlines()[-1])):
         if v is None:
             r['error'] = 'image shape differs from the FD reference'
+        elif r['side'] == 'penumbra':
+            r['rel_l2'], r['vs_mi_dp'], r['vs_mi_sppi0'], r['abs_sum'], r['finite'] = \
+                [v[0]], v[1], v[2], [v[3]], v[4]
         else:
-            r['rel_l2'], r['abs_sum'], r['finite'] = [v[0]], [v[1]], v[2]
+            r['vs_mi_dp'], r['vs_mi_sppi0'] = v[1], v[2]
 
 
 # --- aggregation and report --------------------------------------------------
@@ -300,6 +314,11 @@ def penumbra_errors(a, env, runs):
 def med(xs):
     xs = [x for x in xs if x is not None]
     return statistics.median(xs) if xs else None
+
+
+def mean(xs):
+    xs = [x for x in xs if x is not None]
+    return statistics.mean(xs) if xs else None
 
 
 def summarize(runs):
@@ -321,6 +340,8 @@ def summarize(runs):
                    first_s=med([r.get('first_s') for r in ok]),
                    warm_s=med([r.get('warm_median_s') for r in ok]),
                    peak_rss_mb=med([r.get('peak_rss_mb') for r in ok]),
+                   vs_mi_dp=mean([r.get('vs_mi_dp') for r in ok]),
+                   vs_mi_sppi0=mean([r.get('vs_mi_sppi0') for r in ok]),
                    errors=[r['error'] for r in rs if 'error' in r],
                    zeros=any(s == 0 for r in ok for s in r.get('abs_sum', [])),
                    nonfinite=any(r.get('finite') is False for r in ok),
@@ -341,8 +362,9 @@ def label(row):
 
 def config_table(rows):
     lines = ['| renderer, integrator | spp (sppp) | processes | rel_l2 vs FD (mean ± sd, n images) '
-             '| process wall s (median, range) | first call s | warm call s | peak RSS MB |',
-             '|---|---|---|---|---|---|---|---|']
+             '| process wall s (median, range) | first call s | warm call s | peak RSS MB '
+             '| rel_l2 vs Mitsuba 384 spp: dp / dp sppi 0 |',
+             '|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         spp = f'{r["spp"]}' if r['side'] == 'mitsuba' else f'{r["spp"]} ({r["sppp"]})'
         err = (f'{fmt(r["rel_l2"])} ± {fmt(r["rel_l2_sd"])} ({r["n_images"]})'
@@ -352,7 +374,8 @@ def config_table(rows):
         fail = f' ({r["n_failed"]} failed)' if r['n_failed'] else ''
         lines.append(f'| {label(r)}{flags} | {spp} | {r["n_proc"]}{fail} | {err} '
                      f'| {fmt(r["wall_s"], ".1f")}{rng} | {fmt(r["first_s"], ".2f")} '
-                     f'| {fmt(r["warm_s"], ".2f")} | {fmt(r["peak_rss_mb"], ".0f")} |')
+                     f'| {fmt(r["warm_s"], ".2f")} | {fmt(r["peak_rss_mb"], ".0f")} '
+                     f'| {fmt(r["vs_mi_dp"])} / {fmt(r["vs_mi_sppi0"])} |')
     return lines
 
 
@@ -365,7 +388,7 @@ def times(x):
 
 
 def equal_error_table(rows):
-    lines = ['| Mitsuba (rel_l2) | Penumbra at equal error | Penumbra rel_l2 | whole process: '
+    lines = ['| Mitsuba (rel_l2) | Penumbra at equal error | Penumbra rel_l2 (± sd) | whole process: '
              'time Mitsuba / Penumbra | warm call: Mitsuba / Penumbra | peak RSS: Penumbra / '
              'Mitsuba | target (≥ 10× faster, ≤ 1/10 memory) |',
              '|---|---|---|---|---|---|---|']
@@ -376,21 +399,29 @@ def equal_error_table(rows):
             cand = sorted([p for p in pns if p['config'] == integ], key=lambda p: p['spp'])
             match = [p for p in cand if p['rel_l2'] <= m['rel_l2']]
             if match:
-                p, where = match[0], f'`{integ}` {match[0]["spp"]} spp'
+                picks = [(match[0], f'`{integ}` {match[0]["spp"]} spp', True)]
+                # within the images' scatter of Mitsuba's error: also the
+                # first swept spp that is below it by more than its sd
+                clear = [p for p in match if p['rel_l2'] + (p['rel_l2_sd'] or 0) <= m['rel_l2']]
+                if clear and clear[0] is not match[0]:
+                    picks.append((clear[0], f'`{integ}` {clear[0]["spp"]} spp (below by more '
+                                            f'than its sd)', True))
             else:
                 p = min(cand, key=lambda p: p['rel_l2'])
-                where = (f'**not reached**; lowest error: `{integ}` {p["spp"]} spp '
-                         f'(ratios NOT at equal error)')
-            t = ratio(m['wall_s'], p['wall_s'])
-            w = ratio(m['warm_s'], p['warm_s'])
-            mem = ratio(p['peak_rss_mb'], m['peak_rss_mb'])
-            if match:
-                ok = t is not None and mem is not None and t >= 10 and mem <= 0.1
-                verdict = 'met' if ok else 'not met'
-            else:
-                verdict = 'n/a (error not matched)'
-            lines.append(f'| `{m["config"]}` ({fmt(m["rel_l2"])}) | {where} | {fmt(p["rel_l2"])} '
-                         f'| {times(t)} | {times(w)} | {fmt(mem, ".4f")} | {verdict} |')
+                picks = [(p, f'**not reached**; lowest error: `{integ}` {p["spp"]} spp '
+                             f'(ratios NOT at equal error)', False)]
+            for p, where, matched in picks:
+                t = ratio(m['wall_s'], p['wall_s'])
+                w = ratio(m['warm_s'], p['warm_s'])
+                mem = ratio(p['peak_rss_mb'], m['peak_rss_mb'])
+                if matched:
+                    ok = t is not None and mem is not None and t >= 10 and mem <= 0.1
+                    verdict = 'met' if ok else 'not met'
+                else:
+                    verdict = 'n/a (error not matched)'
+                lines.append(f'| `{m["config"]}` ({fmt(m["rel_l2"])}) | {where} '
+                             f'| {fmt(p["rel_l2"])} ± {fmt(p["rel_l2_sd"])} | {times(t)} '
+                             f'| {times(w)} | {fmt(mem, ".4f")} | {verdict} |')
     return lines
 
 
@@ -447,6 +478,8 @@ def main():
                     default=os.environ.get('PENUMBRA_MITSUBA_PYTHON', DEFAULT_MI_PY))
     ap.add_argument('--timeout', type=float, default=1800, help='seconds per process')
     ap.add_argument('--no-build', action='store_true', help='use the built binary as it is')
+    ap.add_argument('--from-json', default=None, metavar='RESULTS_JSON',
+                    help='run nothing: re-make the tables from a previous run\'s results.json')
     ap.add_argument('--md', default=os.path.join(ROOT, 'docs', 'bench_geom.md'),
                     help='markdown report (default docs/bench_geom.md; "-" for none)')
     a = ap.parse_args()
@@ -468,6 +501,33 @@ def main():
         die(f'missing {rel(FD_REF)} (bundled with the repository)')
 
     env, versions = mitsuba_env(a)
+    results = os.path.join(OUT, 'results.json')
+    if a.from_json:
+        with open(a.from_json) as f:
+            meta = json.load(f)
+        runs = meta.pop('runs')
+        meta.pop('rows', None)
+        meta['rereported'] = f'{datetime.datetime.now():%Y-%m-%d %H:%M}'
+        results = a.from_json
+    else:
+        meta, runs = run_all(a, sweep, mi_cfgs, pn_cfgs, env, versions)
+    image_errors(a.mitsuba_python, env, runs)
+    rows = summarize(runs)
+    rows.sort(key=lambda r: (r['side'] != 'mitsuba',
+                             meta['mitsuba_configs'].index(r['config']) if r['side'] == 'mitsuba'
+                             else meta['penumbra_integrators'].index(r['config']), r['spp']))
+    body, text = report(meta, rows)
+    print('\n' + '\n'.join(body))
+    with open(results, 'w') as f:
+        json.dump(dict(meta, runs=runs, rows=rows), f, indent=1)
+    if a.md != '-':
+        with open(a.md, 'w') as f:
+            f.write(text)
+        print(f'\nwrote {rel(a.md)} and {rel(results)}')
+
+
+def run_all(a, sweep, mi_cfgs, pn_cfgs, env, versions):
+    """Every process of the benchmark; returns (meta, runs)."""
     build_penumbra(a)
     os.makedirs(os.path.join(OUT, 'mi'), exist_ok=True)
     os.makedirs(os.path.join(OUT, 'pn'), exist_ok=True)
@@ -477,7 +537,7 @@ def main():
     cache_dir = os.path.expanduser('~/.drjit')
     cache_start = len([f for f in os.listdir(cache_dir) if f.endswith('.bin')]) \
         if os.path.isdir(cache_dir) else 0
-    cmdline = 'python3 scripts/bench_geom_boundary.py ' + ' '.join(sys.argv[1:])
+    cmdline = ' '.join(['python3 scripts/bench_geom_boundary.py'] + sys.argv[1:])
 
     # the jobs of one repetition: Penumbra's sweeps cut into as many chunks
     # as there are Mitsuba configurations, alternating with them
@@ -507,41 +567,51 @@ def main():
             e = r.get('rel_l2')
             print(f'{r["wall_s"]:.1f} s, {fmt(r["peak_rss_mb"], ".0f")} MB'
                   + (f', rel_l2 {", ".join(f"{x:.3f}" for x in e)}' if e else ''), flush=True)
-    penumbra_errors(a, env, runs)
-    total = time.perf_counter() - t_run
-    rows = summarize(runs)
-    rows.sort(key=lambda r: (r['side'] != 'mitsuba',
-                             mi_cfgs.index(r['config']) if r['side'] == 'mitsuba'
-                             else pn_cfgs.index(r['config']), r['spp']))
+    meta = dict(date=started.isoformat(timespec='minutes'), command=cmdline, versions=versions,
+                machine=machine_note(), load_start=load_start[0], load_end=os.getloadavg()[0],
+                drjit_cache_files_at_start=cache_start, penumbra=git_rev(),
+                total_s=time.perf_counter() - t_run, spp=a.spp, sppp=a.sppp, calls=a.calls,
+                mitsuba_calls=a.mitsuba_calls, mitsuba_configs=mi_cfgs,
+                penumbra_integrators=pn_cfgs)
+    return meta, runs
 
+
+def report(meta, rows):
+    """(the tables, the whole markdown page)."""
+    m = meta
     head = [
         '# Geometry derivative on `geom`: Penumbra beside Mitsuba 3 `direct_projective`',
         '',
-        f'Generated by `scripts/bench_geom_boundary.py` (its docstring has the set-up); '
-        f'do not edit by hand, re-run it.',
+        'Generated by `scripts/bench_geom_boundary.py` (its docstring has the set-up); '
+        'do not edit by hand, re-run it.',
         '',
-        f'- date: {started:%Y-%m-%d %H:%M}; total run {total / 60:.1f} min',
-        f'- machine: {machine_note()}; **shared with other builds and noisy** '
-        f'(load average {load_start[0]:.1f} at the start, {os.getloadavg()[0]:.1f} at the end): '
+        f'- date: {m["date"].replace("T", " ")}; total run {m["total_s"] / 60:.1f} min'
+        + (f' (tables re-made from its results.json on {m["rereported"]})'
+           if m.get('rereported') else ''),
+        f'- machine: {m["machine"]}; **shared with other builds and noisy** '
+        f'(load average {m["load_start"]:.1f} at the start, {m["load_end"]:.1f} at the end): '
         f'quote ratios from one run, not absolute times',
-        f'- Mitsuba {versions["mitsuba"]}, Dr.Jit {versions["drjit"]}, LLVM {versions["llvm"]}, '
-        f'variant llvm_ad_rgb; Dr.Jit kernel cache ~/.drjit held {cache_start} kernels at the '
-        f'start (first calls load from it what they can)',
-        f'- Penumbra {git_rev()}',
-        f'- command: `{cmdline}`',
-        f'- derivative: d image / d x, translation of mesh `obj` along +x, 128²; reference '
-        f'`scenes/refs/geom_dimg_dx_fd.exr` (central FD, ε = 0.01, 8192 spp per side); '
-        f'rel_l2 = ‖a − b‖ / ‖b‖ of one image (Mitsuba: every call; Penumbra: first call)',
-        f'- Mitsuba: scripts/mitsuba/geom_fwd.py, {a.spp} spp (the runtime spp sets sppc, '
+        f'- Mitsuba {m["versions"]["mitsuba"]}, Dr.Jit {m["versions"]["drjit"]}, '
+        f'LLVM {m["versions"]["llvm"]}, variant llvm_ad_rgb; Dr.Jit kernel cache ~/.drjit '
+        f'held {m["drjit_cache_files_at_start"]} kernels at the start (first calls load from '
+        f'it what they can)',
+        f'- Penumbra {m["penumbra"]}',
+        f'- command: `{m["command"]}`',
+        '- derivative: d image / d x, translation of mesh `obj` along +x, 128²; reference '
+        '`scenes/refs/geom_dimg_dx_fd.exr` (central FD, ε = 0.01, 8192 spp per side); '
+        'rel_l2 = ‖a − b‖ / ‖b‖ of one image (Mitsuba: every call; Penumbra: first call); '
+        'the last column compares the first images with Mitsuba\'s own 384-spp estimates '
+        '(`scenes/refs/geom_dimg_dx_direct_projective{,_sppi0}.exr`)',
+        f'- Mitsuba: scripts/mitsuba/geom_fwd.py, {m["spp"]} spp (the runtime spp sets sppc, '
         f'sppp and sppi; sppi = 0 stays 0), seeds 1000·rep + call, '
-        f'{a.mitsuba_calls} warm call(s) after the first in each process',
-        f'- Penumbra: `penumbra grad SCENE -D res=128 --param obj.vertex_positions --mode '
-        f'forward --translate 1,0,0 --spp N` '
-        + (f'--sppp {a.sppp}' if a.sppp is not None else '(sppp = N)')
-        + f' --reps {a.calls}; `path` = scenes/geom.xml (max_depth 2); `direct_projective` '
+        f'{m["mitsuba_calls"]} warm call(s) after the first in each process',
+        '- Penumbra: `penumbra grad SCENE -D res=128 --param obj.vertex_positions --mode '
+        'forward --translate 1,0,0 --spp N` '
+        + (f'--sppp {m["sppp"]}' if m['sppp'] is not None else '(sppp = N)')
+        + f' --reps {m["calls"]}; `path` = scenes/geom.xml (max_depth 2); `direct_projective` '
           f'= the same scene with that integrator',
         f'- times: process wall = the whole process (start-up, load, the first call and '
-        f'the warm ones: {a.mitsuba_calls} for Mitsuba, {a.calls} for Penumbra), from '
+        f'the warm ones: {m["mitsuba_calls"]} for Mitsuba, {m["calls"]} for Penumbra), from '
         f'/usr/bin/time; first / warm call = one derivative image as the '
         f'program times it (Mitsuba: primal + forward pass, incl. JIT compilation); peak '
         f'RSS of the whole process (/usr/bin/time %M)',
@@ -562,17 +632,7 @@ def main():
     notes.append('- Until Penumbra has the boundary term of shadow edges, its rel_l2 '
                  'plateaus near 0.27 whatever the spp (the bias of the missing term); '
                  'Mitsuba\'s `direct_projective` with sppi = 0 misses the same term.')
-    text = '\n'.join(head + body + notes) + '\n'
-    print('\n' + '\n'.join(body))
-    with open(os.path.join(OUT, 'results.json'), 'w') as f:
-        json.dump(dict(date=started.isoformat(), command=cmdline, versions=versions,
-                       machine=machine_note(), load_start=load_start, load_end=os.getloadavg(),
-                       drjit_cache_files_at_start=cache_start, penumbra=git_rev(),
-                       total_s=total, runs=runs, rows=rows), f, indent=1)
-    if a.md != '-':
-        with open(a.md, 'w') as f:
-            f.write(text)
-        print(f'\nwrote {rel(a.md)} and {rel(os.path.join(OUT, "results.json"))}')
+    return body, '\n'.join(head + body + notes) + '\n'
 
 
 if __name__ == '__main__':
