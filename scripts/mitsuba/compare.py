@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 # Copied from the project's shared reference kit (Mitsuba 3.9.1 / Dr.Jit 1.5.0); unchanged
-# apart from this line and the docstring's path.
+# apart from this line, the docstring's path and rel_l2() taken out of main()
+# as a function (same formula) for scripts/bench_geom_boundary.py.
 
 """Compare an image (or gradient array) produced by another renderer with a
 reference from scenes/refs/.
@@ -39,6 +40,12 @@ def read(path):
                          for c in chans], -1).astype(np.float64)
 
 
+def rel_l2(x, r):
+    """||x - r|| / ||r|| over all elements (float64)."""
+    x = np.asarray(x, np.float64); r = np.asarray(r, np.float64)
+    return float(np.linalg.norm(x - r) / max(np.linalg.norm(r), 1e-30))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('ours')
@@ -56,7 +63,7 @@ def main():
         'mean_ours': float(x.mean()), 'mean_ref': float(r.mean()),
         'sum_ours': float(x.sum()), 'sum_ref': float(r.sum()),
         'relMSE': float(np.mean((x - r) ** 2 / (r ** 2 + 1e-2))),
-        'rel_l2': float(np.linalg.norm(x - r) / max(np.linalg.norm(r), 1e-30)),
+        'rel_l2': rel_l2(x, r),
         'MAE': float(np.mean(np.abs(x - r))),
     }
     print(json.dumps(out, indent=1))

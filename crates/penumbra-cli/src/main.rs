@@ -118,9 +118,9 @@ enum Command {
         run: RunArgs,
     },
     /// Derivatives of a render: a forward-mode derivative image along the
-    /// parameters' own values (d image / d s for θ·s at s = 1), or
-    /// reverse-mode gradients of an L2 loss against a target image (of the
-    /// image sum without --target).
+    /// parameters' own values (d image / d s for θ·s at s = 1) or along
+    /// --translate, or reverse-mode gradients of an L2 loss against a target
+    /// image (of the image sum without --target).
     Grad {
         #[command(flatten)]
         scene: SceneArgs,
@@ -146,6 +146,11 @@ enum Command {
         /// --seed by penumbra::diff::gradient_seed, decorrelated from it].
         #[arg(long)]
         seed_grad: Option<u64>,
+        /// Forward mode: differentiate along a translation "x,y,z" instead of
+        /// θ·s: moves every point of vertex positions or a sphere's centre,
+        /// or the translation of a to_world (as check-grad --translate).
+        #[arg(long, value_parser = vec3_parser)]
+        translate: Option<[f32; 3]>,
         #[command(flatten)]
         budgets: BudgetArgs,
         /// Output folder (derivative image, gradient images of textures).
@@ -374,6 +379,7 @@ fn run(cli: Cli) -> Result<(), String> {
             spp,
             seed,
             seed_grad,
+            translate,
             budgets,
             output,
             reps,
@@ -381,6 +387,11 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             if mode != "forward" && mode != "reverse" {
                 return Err(format!("--mode must be forward or reverse, not '{mode}'"));
+            }
+            if translate.is_some() && mode != "forward" {
+                return Err(
+                    "--translate gives the tangent of forward mode; add --mode forward".into(),
+                );
             }
             let mut scene = scene_args.load()?;
             if let Some(v) = init {
@@ -425,11 +436,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 if mode == "forward" {
                     let tangents: Vec<Vec<f32>> = keys
                         .iter()
-                        .map(|k| {
-                            scene
+                        .map(|k| match translate {
+                            Some(t) => translation_tangent(&scene, k, t),
+                            None => scene
                                 .params
                                 .require(k)
-                                .map(|id| scene.params.data(id).to_vec())
+                                .map(|id| scene.params.data(id).to_vec()),
                         })
                         .collect::<Result<_, _>>()
                         .map_err(err)?;

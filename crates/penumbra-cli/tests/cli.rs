@@ -353,3 +353,46 @@ fn sppp_sets_the_primary_boundary_budget_of_derivative_commands() {
         assert!(err.contains("'--sppp <N>'"), "{cmd}: {err}");
     }
 }
+
+/// `grad --mode forward --translate x,y,z` differentiates along a
+/// translation (as `check-grad --translate`): the derivative image is
+/// linear in it, and differs from the default tangent θ·s; reverse mode
+/// refuses it.
+#[test]
+fn grad_translate_gives_the_forward_tangent() {
+    let dir = fresh_dir("translate");
+    let dimage = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let args = [
+            &[
+                "grad", "-q", "-D", "res=8", "--spp", "1", "--mode", "forward",
+            ][..],
+            &["--param", "small-box.vertex_positions", "-o"],
+            &[out.to_str().unwrap()],
+            extra,
+        ]
+        .concat();
+        run_ok(&args);
+        penumbra::image::read_image(&out.join("dimage.exr"))
+            .unwrap()
+            .data
+    };
+    let scale = dimage("scale", &[]);
+    let x1 = dimage("x1", &["--translate", "1,0,0"]);
+    let x2 = dimage("x2", &["--translate", "2,0,0"]);
+    assert_ne!(scale, x1);
+    assert!(x1.iter().any(|&v| v != 0.0));
+    for (a, b) in x1.iter().zip(&x2) {
+        assert!((2.0 * a - b).abs() <= 1e-5 * b.abs().max(1e-3), "{a} {b}");
+    }
+    let (code, err) = run_err(&[
+        "grad",
+        "-q",
+        "--translate",
+        "1,0,0",
+        "--param",
+        "small-box.vertex_positions",
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--mode forward"), "{err}");
+}
