@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the Python wheel (crates/penumbra-py, maturin, abi3) into a fresh
-# virtualenv and runs its pytest suite (incl. the two example loops).
+# virtualenv and runs its pytest suite (incl. the example loops).
 #
 #   scripts/test_python.sh            # venv in <target dir>/py-venv (reused if present)
 #   PENUMBRA_FRESH_VENV=1 scripts/test_python.sh   # recreate it

@@ -353,13 +353,14 @@ def render_backward(
     sppp=None,
     sppi=None,
 ) -> dict:
-    """Reverse-mode derivative (path replay): given ``d_image`` =
+    """Reverse-mode derivative: given ``d_image`` =
     ∂loss/∂image of the image rendered with ``seed`` (``(H, W, 3)``, or
     ``(H, W, 4)`` with an rgba film, whose alpha entries are ignored; any
     other shape is an error naming both), returns ``{key: ∂loss/∂param}``
     shaped like the parameters, for ``keys`` (default: every differentiable
     parameter that is not geometry: vertex normals count as geometry). Needs
-    the path or direct integrator.
+    the path or direct integrator (also under Mitsuba's names ``prb``,
+    ``prb_basic``, ``prb_projective``, ``direct_projective``).
 
     The paths are replayed with ``seed_grad``, by default
     :func:`gradient_seed` ``(seed)``: samples independent of the image's,
@@ -367,8 +368,10 @@ def render_backward(
     gives the exact derivative of the rendered estimate instead.
 
     ``spp``, ``sppp`` and ``sppi`` override the integrator's ``sppc``,
-    ``sppp`` and ``sppi`` as in :func:`render_forward`; both modes take the
-    same boundary samples."""
+    ``sppp`` and ``sppi`` as in :func:`render_forward`; like forward mode,
+    reverse mode adds the boundary terms of primary visibility and of
+    shadows when a key moves geometry or the camera, from the same boundary
+    samples."""
     _check_scene(scene)
     a = _adjoint(scene, d_image, _sensor(sensor))
     if keys is not None:

@@ -28,8 +28,14 @@ for the derivative of a 3-D rotation in exponential coordinates")::
 
 With torch, :meth:`Pose.torch_params` builds the parameters from tensors
 so that autograd runs the chain rule (``penumbra.torch.render(scene,
-pose.torch_params(t, r))``). Only the interior term of the derivative is
-estimated: silhouettes that move are not in the gradient yet.
+pose.torch_params(t, r))``). The gradients are those of
+:func:`penumbra.render_backward`: the interior term and the boundary term
+of primary visibility (the silhouettes and other mesh edges the camera
+sees moving, ``sppp`` edge samples per pixel, with a pinhole or
+orthographic camera); the boundary terms of shadows and of edges seen
+after a bounce are not estimated yet. The examples
+``examples/pose_object.py`` and ``examples/pose_camera.py`` recover an
+object's and a camera's pose from one image through the primary term.
 """
 
 from __future__ import annotations

@@ -55,9 +55,13 @@
 //! `init_translation` / `init_rotation_deg` are where the optimisation
 //! starts, and the scene as loaded is the truth (the zero pose), against
 //! which errors are reported when the targets are rendered from it.
-//! A mesh's vertex normals turn with its positions. Poses get the interior
-//! term of the derivative only (no silhouette terms yet: see
-//! [`crate::diff::missing_boundary_terms_message`]).
+//! A mesh's vertex normals turn with its positions. A `[[pose]]` of a
+//! sensor's `to_world` moves the camera (`scenes/jobs/pose_camera.toml`).
+//! The gradients are reverse mode's: the interior term and, when the
+//! parameters move geometry or the camera, the boundary term of primary
+//! visibility (`sppp`); the boundary terms of shadows and of edges seen
+//! after a bounce are missing (see
+//! [`crate::diff::missing_indirect_boundary_terms_message`]).
 
 use super::pose::{rotation_matrix, PoseGrad, PosedParam};
 use super::{Loss, Method, Optimizer};
