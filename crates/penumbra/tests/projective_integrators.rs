@@ -82,7 +82,8 @@ fn mitsuba_names_load_with_mitsuba_defaults() {
         p.budgets,
         Budgets {
             sppc: Some(8),
-            sppp: Some(0)
+            sppp: Some(0),
+            sppi: Some(0)
         }
     );
 
@@ -100,7 +101,8 @@ fn mitsuba_names_load_with_mitsuba_defaults() {
         d.budgets,
         Budgets {
             sppc: None,
-            sppp: Some(16)
+            sppp: Some(16),
+            sppi: None
         }
     );
 }
@@ -151,10 +153,9 @@ fn unknown_and_invalid_properties_are_errors_naming_them() {
 }
 
 /// Accepted properties that change nothing are warned about once per
-/// load, naming them: a positive `sppi` (the indirect term is not
-/// implemented), the guiding options, and `max_depth` ≠ 2, `rr_depth`,
-/// `project_seed` of `direct_projective`. Budgets that are honoured are
-/// not.
+/// load, naming them: the guiding options, and `max_depth` ≠ 2,
+/// `rr_depth`, `project_seed` of `direct_projective`. Budgets (all
+/// honoured, `sppi` included) are not.
 #[test]
 fn ignored_properties_are_warned_about() {
     let seen = Arc::new(Mutex::new(Vec::<String>::new()));
@@ -174,16 +175,6 @@ fn ignored_properties_are_warned_about() {
             .collect()
     };
     let w = warnings_of(
-        r#"<integrator type="prb_projective"><integer name="sppi" value="64"/></integrator>"#,
-    );
-    assert_eq!(w.len(), 1, "{w:?}");
-    assert!(
-        w[0].contains("sppi = 64") && w[0].contains("indirect visibility"),
-        "{w:?}"
-    );
-    assert!(w[0].contains("not implemented yet"), "{w:?}");
-
-    let w = warnings_of(
         r#"<integrator type="direct_projective">
             <string name="guiding" value="grid"/>
             <integer name="guiding_rounds" value="2"/>
@@ -200,6 +191,7 @@ fn ignored_properties_are_warned_about() {
             <integer name="sppc" value="4"/><integer name="sppp" value="4"/>
             <integer name="sppi" value="0"/>
         </integrator>"#,
+        r#"<integrator type="prb_projective"><integer name="sppi" value="64"/></integrator>"#,
         r#"<integrator type="direct_projective"><integer name="max_depth" value="2"/></integrator>"#,
     ] {
         let w = warnings_of(quiet);

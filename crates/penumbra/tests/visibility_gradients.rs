@@ -73,10 +73,12 @@ fn orthographic_sensor(size: u32, spp: u32) -> String {
         .replace("<lookat", r#"<scale x="1.6" y="1.6"/><lookat"#)
 }
 
+/// `sppp` is the budget of both boundary terms (primary and shadows).
 fn opts(seed: u64, spp: u32, sppp: u32) -> RenderOptions {
     RenderOptions {
         spp: Some(spp),
         sppp: Some(sppp),
+        sppi: Some(sppp),
         seed,
         ..Default::default()
     }
@@ -216,32 +218,61 @@ fn compare_with_finite_differences(
     key: &str,
     tangent: impl Fn(&Scene) -> Vec<f32>,
     h: f32,
+    budgets: (u32, u32),
+) {
+    compare_moves_with_finite_differences(name, xml, &[(key, &tangent)], h, budgets)
+}
+
+/// [`compare_with_finite_differences`] for several parameters moving at
+/// once, each along its own tangent.
+#[allow(clippy::type_complexity)]
+fn compare_moves_with_finite_differences(
+    name: &str,
+    xml: &str,
+    moves: &[(&str, &dyn Fn(&Scene) -> Vec<f32>)],
+    h: f32,
     (spp, sppp): (u32, u32),
 ) {
     let mut scene = load(xml);
-    let t = tangent(&scene);
-    let id = scene.params.require(key).unwrap();
-    let base = scene.params.data(id).to_vec();
+    // per key: the tangent, the value, and the vertex normals to keep
+    let moves: Vec<(&str, Vec<f32>, Vec<f32>, Option<(String, Vec<f32>)>)> = moves
+        .iter()
+        .map(|(key, tangent)| {
+            let id = scene.params.require(key).unwrap();
+            // a mesh's vertex normals are recomputed from moved positions
+            // unless they are set in the same update (as in Mitsuba): keep
+            // them, they are right for a translation
+            let normals_key = key.replace("vertex_positions", "vertex_normals");
+            let normals = scene
+                .params
+                .id(&normals_key)
+                .filter(|_| normals_key != *key)
+                .map(|id| (normals_key.clone(), scene.params.data(id).to_vec()));
+            (
+                *key,
+                tangent(&scene),
+                scene.params.data(id).to_vec(),
+                normals,
+            )
+        })
+        .collect();
+    let tangents: Vec<(&str, &[f32])> = moves
+        .iter()
+        .map(|(k, t, _, _)| (*k, t.as_slice()))
+        .collect();
     let pixels = |data: &[f32], scale: f64| -> Vec<f64> {
         data.chunks_exact(3)
             .map(|c| c.iter().map(|&v| v as f64).sum::<f64>() * scale)
             .collect()
     };
     let (mut fwd, mut fd) = (Vec::new(), Vec::new());
-    // a mesh's vertex normals are recomputed from moved positions unless
-    // they are set in the same update (as in Mitsuba): keep them, they are
-    // right for a translation
-    let normals_key = key.replace("vertex_positions", "vertex_normals");
-    let normals = scene
-        .params
-        .id(&normals_key)
-        .filter(|_| normals_key != key)
-        .map(|id| scene.params.data(id).to_vec());
     let set = |scene: &mut Scene, s: f32| {
-        let v: Vec<f32> = base.iter().zip(&t).map(|(b, t)| b + s * t).collect();
-        scene.params.set(key, &v).unwrap();
-        if let Some(n) = &normals {
-            scene.params.set(&normals_key, n).unwrap();
+        for (key, t, base, normals) in &moves {
+            let v: Vec<f32> = base.iter().zip(t).map(|(b, t)| b + s * t).collect();
+            scene.params.set(key, &v).unwrap();
+            if let Some((k, n)) = normals {
+                scene.params.set(k, n).unwrap();
+            }
         }
         scene.update().unwrap();
     };
@@ -261,7 +292,7 @@ fn compare_with_finite_differences(
                 h * (2.0 * (k as f32 + 0.5) / STEPS as f32 - 1.0),
             );
             let o = opts(2000 + b * STEPS as u64 + k as u64, spp, sppp);
-            let d = render_forward(&scene, &[(key, &t)], &o).unwrap();
+            let d = render_forward(&scene, &tangents, &o).unwrap();
             let d = pixels(&d.data, 1.0 / STEPS as f64);
             mean.iter_mut().zip(d).for_each(|(m, d)| *m += d);
         }
@@ -692,7 +723,11 @@ fn warnings_name_only_the_missing_terms() {
     };
     let ours = |seen: &Arc<Mutex<Vec<String>>>| -> Vec<String> {
         let mut seen = seen.lock().unwrap();
-        let ours = seen.iter().filter(|m| m.starts_with(key)).cloned().collect();
+        let ours = seen
+            .iter()
+            .filter(|m| m.starts_with(key))
+            .cloned()
+            .collect();
         seen.clear();
         ours
     };
@@ -718,7 +753,11 @@ fn warnings_name_only_the_missing_terms() {
         assert!(m.contains("are missing"), "{m}");
         assert!(!m.contains("primary visibility"), "{m}");
     }
-    assert!(messages[0].contains("indirect visibility"), "{}", messages[0]);
+    assert!(
+        messages[0].contains("indirect visibility"),
+        "{}",
+        messages[0]
+    );
     assert!(!messages[0].contains("shadows"), "{}", messages[0]);
     assert!(messages[1].contains("shadows of point"), "{}", messages[1]);
     assert!(!messages[1].contains("indirect"), "{}", messages[1]);
@@ -827,6 +866,20 @@ fn forward_and_reverse_mode_agree_with_the_boundary_term() {
     }
     let cube = load(&cube_scene());
     assert_modes_agree("cube", &cube, "cube.vertex_positions", 12);
+    // the shadow term: an occluder, the receiver, the camera
+    let shadow = load(&shadow_scene(
+        32,
+        OCCLUDER,
+        r#"<scale value="1.5"/>"#,
+        "1.2, 0.6, 3",
+    ));
+    for key in [
+        "occluder.vertex_positions",
+        "receiver.vertex_positions",
+        "camera.to_world",
+    ] {
+        assert_modes_agree(&format!("shadow, {key}"), &shadow, key, 14);
+    }
     // a path tracer's noisy jumps across a smooth mesh's silhouette
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/geom.xml");
     let geom = Scene::load_file(&path, &[("res".into(), "32".into())]).unwrap();
@@ -906,12 +959,7 @@ fn occluder_between_light_and_receiver_matches_finite_differences() {
     let key = "occluder.vertex_positions";
     compare_with_finite_differences(
         "occluder moved",
-        &shadow_scene(
-            32,
-            r#"<scale value="0.3"/><rotate z="1" angle="25"/><translate x="0.1" y="0.1" z="1"/>"#,
-            r#"<scale value="1.5"/>"#,
-            "1.2, 0.6, 3",
-        ),
+        &shadow_scene(32, OCCLUDER, r#"<scale value="1.5"/>"#, "1.2, 0.6, 3"),
         key,
         |s| translation_tangent(s, key, [1.0, 0.4, 0.0]).unwrap(),
         0.005,
@@ -935,6 +983,178 @@ fn shadow_of_an_unseen_occluder_matches_finite_differences() {
         key,
         |s| translation_tangent(s, key, [1.0, 0.4, 0.0]).unwrap(),
         0.005,
+        (16, 16),
+    );
+}
+
+/// The occluder of [`occluder_between_light_and_receiver_matches_finite_differences`]
+/// fixed, the receiver moving towards the camera and sideways: the shadow
+/// slides over it and grows.
+#[test]
+fn moving_shadow_receiver_matches_finite_differences() {
+    let key = "receiver.vertex_positions";
+    compare_with_finite_differences(
+        "receiver moved",
+        &shadow_scene(32, OCCLUDER, r#"<scale value="1.5"/>"#, "1.2, 0.6, 3"),
+        key,
+        |s| translation_tangent(s, key, [0.3, -0.2, 1.0]).unwrap(),
+        0.01,
+        (16, 16),
+    );
+}
+
+/// The receiver and the light moving together (the occluder fixed).
+#[test]
+fn plane_and_its_emitter_moving_together_match_finite_differences() {
+    let (receiver, light) = ("receiver.vertex_positions", "light.vertex_positions");
+    let along =
+        |key: &'static str| move |s: &Scene| translation_tangent(s, key, [1.0, 0.5, 0.0]).unwrap();
+    compare_moves_with_finite_differences(
+        "plane and emitter moved",
+        &shadow_scene(32, OCCLUDER, r#"<scale value="1.5"/>"#, "1.2, 0.6, 3"),
+        &[(receiver, &along(receiver)), (light, &along(light))],
+        0.01,
+        (16, 16),
+    );
+}
+
+/// The camera moving over the shadow: the first vertices slide across the
+/// shadow's edges.
+#[test]
+fn camera_moving_over_a_shadow_matches_finite_differences() {
+    let key = "camera.to_world";
+    compare_with_finite_differences(
+        "camera moved over a shadow",
+        &shadow_scene(32, OCCLUDER, r#"<scale value="1.5"/>"#, "1.2, 0.6, 3"),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.0]).unwrap(),
+        0.005,
+        (16, 16),
+    );
+}
+
+/// The occluder of the shadow tests: a small square tilted in its plane,
+/// between the receiver and the light.
+const OCCLUDER: &str =
+    r#"<scale value="0.3"/><rotate z="1" angle="25"/><translate x="0.1" y="0.1" z="1"/>"#;
+
+/// A floor and a wall meeting at a right angle, one flat-shaded mesh (an
+/// OBJ written for the test), tilted towards the camera and lit from
+/// behind the wall: the wall shadows the floor.
+fn right_angle_scene() -> String {
+    let path = std::env::temp_dir().join(format!(
+        "penumbra-visibility-{}-right-angle.obj",
+        std::process::id()
+    ));
+    std::fs::write(
+        &path,
+        "v -1 -1 0\nv 1 -1 0\nv 1 0 0\nv -1 0 0\nv 1 0 0.8\nv -1 0 0.8\n\
+         f 1 2 3\nf 1 3 4\nf 4 3 5\nf 4 5 6\n",
+    )
+    .unwrap();
+    format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct"/>
+            {sensor}
+            <shape type="obj" id="pair">
+                <string name="filename" value="{path}"/>
+                <transform name="to_world"><rotate x="1" angle="-35"/><translate y="0.3"/></transform>
+                <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></bsdf>
+            </shape>
+            <shape type="rectangle" id="light">
+                <transform name="to_world">
+                    <scale value="0.3"/>
+                    <lookat origin="0.6, 2.5, 2.2" target="0, -0.4, 0" up="0, 0, 1"/>
+                </transform>
+                <emitter type="area"><rgb name="radiance" value="30, 30, 30"/></emitter>
+            </shape>
+        </scene>"#,
+        sensor = sensor(32, 4),
+        path = path.display()
+    )
+}
+
+/// The right-angle pair moved: its own shadow (the wall's on the floor)
+/// moves with it, and so do its outline and the fold between the faces.
+#[test]
+fn right_angle_self_shadowing_pair_matches_finite_differences() {
+    let key = "pair.vertex_positions";
+    compare_with_finite_differences(
+        "right-angle pair moved",
+        &right_angle_scene(),
+        key,
+        |s| translation_tangent(s, key, [1.0, 0.5, 0.3]).unwrap(),
+        0.01,
+        (16, 16),
+    );
+}
+
+/// `shape` (with id `caster`) above a ground plane, lit by a small area
+/// light: the caster's shadow falls on the ground.
+fn caster_scene(shape: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct"/>
+            {sensor}
+            <shape type="rectangle" id="ground">
+                <transform name="to_world"><scale value="2.5"/><translate z="-1.2"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>
+            </shape>
+            {shape}
+            <shape type="rectangle" id="light">
+                <transform name="to_world">
+                    <scale value="0.4"/>
+                    <lookat origin="2, 1.5, 3" target="0, 0, 0" up="0, 1, 0"/>
+                </transform>
+                <emitter type="area"><rgb name="radiance" value="30, 30, 30"/></emitter>
+            </shape>
+        </scene>"#,
+        sensor = sensor(32, 4)
+    )
+}
+
+/// A welded smooth-shaded sphere (the icosphere with its exact normals)
+/// casting a shadow on the ground, moved: its silhouette and its shadow's
+/// edge (cast by the edges where its faces turn from the light) move.
+#[test]
+fn smooth_sphere_shadow_matches_finite_differences() {
+    let xml = caster_scene(
+        r#"<shape type="ply" id="caster">
+            <string name="filename" value="meshes/icosphere3.ply"/>
+            <transform name="to_world"><translate y="-0.6"/><scale value="1.6"/></transform>
+            <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+        </shape>"#,
+    );
+    let key = "caster.vertex_positions";
+    compare_with_finite_differences(
+        "smooth sphere and its shadow moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.3]).unwrap(),
+        0.01,
+        (16, 16),
+    );
+}
+
+/// A flat-shaded cube (normal seams at its edges) casting a shadow on the
+/// ground, moved.
+#[test]
+fn flat_shaded_cube_shadow_matches_finite_differences() {
+    let xml = caster_scene(
+        r#"<shape type="cube" id="caster">
+            <transform name="to_world">
+                <scale value="0.5"/><rotate y="1" angle="35"/><rotate x="1" angle="25"/>
+            </transform>
+            <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+        </shape>"#,
+    );
+    let key = "caster.vertex_positions";
+    compare_with_finite_differences(
+        "flat-shaded cube and its shadow moved",
+        &xml,
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.3]).unwrap(),
+        0.01,
         (16, 16),
     );
 }

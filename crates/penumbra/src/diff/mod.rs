@@ -96,7 +96,8 @@ pub(crate) fn warn_missing_boundary_terms(
     });
     let analytic = |s: &Shape| s.as_mesh().is_none();
     let analytic_silhouettes_move = scene.shapes.iter().any(|s| {
-        analytic(s) && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
+        analytic(s)
+            && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
     });
     let mut missing = Vec::new();
     if !terms.primary {

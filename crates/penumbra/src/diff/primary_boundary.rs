@@ -33,7 +33,8 @@
 //! # How
 //!
 //! Per render, every candidate edge (boundary, sharp, non-manifold, and
-//! smooth edges that are silhouettes from the camera) whose image moves
+//! smooth edges that are silhouettes from the camera or folds it looks
+//! into, where one face may shadow the other) whose image moves
 //! with the parameters is projected onto the film in the number type of
 //! the pass (vertices read through the store, so the positions and
 //! `to_world` and the sensor's pose and field of view all move it; in
@@ -75,14 +76,14 @@
 //! interpolated shading normal (BSDFs and area emitters are zero below it;
 //! near the silhouettes of a coarse mesh it lines them inside the faces) is
 //! merged into the silhouette when it is thinner than a pixel
-//! ([`Context::beyond_horizon`]) and missing otherwise; a smooth edge
-//! between a face that sees a light and a neighbour that shadows itself
-//! from it (a shadow edge seen directly) is left to the shadow estimator
-//! to come.
+//! ([`Context::beyond_horizon`]) and missing otherwise; a convex smooth
+//! edge between a face that sees a light and a neighbour that shadows
+//! itself from it (the terminator of a coarse smooth mesh, seen directly)
+//! is not sampled.
 
+use super::splat::{FilmSplatter, Region, CHUNK};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Dual, Real, Var};
-use super::splat::{FilmSplatter, Region, CHUNK};
 use crate::error::Result;
 use crate::geometry::edges::{Edge, EdgeKind, EdgeTable, Eye};
 use crate::geometry::{DiffRay, Mesh, Shape};
@@ -249,7 +250,10 @@ fn segments<R: EdgeMotion>(
         for (edge_index, e) in mesh.edges.edges.iter().enumerate() {
             match e.kind {
                 EdgeKind::Inert => continue,
-                EdgeKind::Smooth if !EdgeTable::is_silhouette(e, &mesh.faces, positions, eye) => {
+                EdgeKind::Smooth
+                    if !EdgeTable::is_silhouette(e, &mesh.faces, positions, eye)
+                        && !EdgeTable::is_concave(e, &mesh.faces, positions, eye) =>
+                {
                     continue
                 }
                 _ => {}
@@ -553,11 +557,11 @@ impl<'a, M: Sync> Context<'a, M> {
         let mut out = Vec::new();
         let mut non_finite = 0;
         for k in 0..count {
-            let mut rng = self
-                .film
-                .sensor
-                .sampler
-                .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
+            let mut rng =
+                self.film
+                    .sensor
+                    .sampler
+                    .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
             // jittered strata of the total length within the chunk: the
             // chunk's samples are summed with equal weights, so the sum is
             // unbiased, and the opposite contributions of the two sides of

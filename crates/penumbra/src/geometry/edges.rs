@@ -209,6 +209,26 @@ impl EdgeTable {
     }
 }
 
+impl EdgeTable {
+    /// Whether the viewer (`eye`) looks into the fold of edge `e`: the
+    /// opposite vertex of its second face lies on the viewer's side of the
+    /// first face's plane. Radiance may jump across such an edge even when
+    /// the shading is smooth (one face shadows the other), unlike across a
+    /// convex smooth edge seen from outside.
+    pub fn is_concave(e: &Edge, faces: &[[u32; 3]], positions: &[f32], eye: Eye) -> bool {
+        if e.other_face == u32::MAX {
+            return false;
+        }
+        let [a, b] = e.vertices(faces).map(|i| position(positions, i));
+        let n = (b - a).cross(position(positions, e.opposite[0]) - a);
+        let viewer = match eye {
+            Eye::Point(c) => n.dot(c - a),
+            Eye::Direction(d) => -n.dot(d),
+        };
+        viewer * n.dot(position(positions, e.opposite[1]) - a) > 0.0
+    }
+}
+
 /// Where camera rays come from, for [`EdgeTable::is_silhouette`].
 #[derive(Clone, Copy, Debug)]
 pub enum Eye {

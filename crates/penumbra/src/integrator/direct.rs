@@ -39,9 +39,10 @@ impl DirectIntegrator {
     /// Mitsuba's `direct_projective`: its estimator is this one with one
     /// emitter and one BSDF sample per hit, plus the derivative budgets.
     /// Mitsuba reads `max_depth` and `rr_depth` there but always traces
-    /// depth 2, and `project_seed` chooses the seed rays of the indirect
-    /// term; all three are accepted (so that its scenes load) and warned
-    /// about when they would change something.
+    /// depth 2, and `project_seed` chooses the seed rays of its indirect
+    /// term (Penumbra samples that term from the edges towards the
+    /// emitters); all three are accepted (so that its scenes load) and
+    /// warned about when they would change something.
     pub(crate) fn projective_from_node(node: &Node) -> Result<DirectIntegrator> {
         let budgets = Budgets::from_projective_node(node)?;
         let mut ignored = Vec::new();
@@ -57,8 +58,9 @@ impl DirectIntegrator {
         node.choice("project_seed", &["both", "bsdf", "emitter"])?;
         if !ignored.is_empty() {
             crate::warn(format!(
-                "{node} at {}: {} ignored: direct illumination always traces depth 2 and the \
-                 indirect visibility term that project_seed serves is not implemented yet",
+                "{node} at {}: {} ignored: direct illumination always traces depth 2, and \
+                 Penumbra samples the indirect visibility term that project_seed steers in \
+                 Mitsuba from the edges towards the emitters",
                 node.loc,
                 ignored.join(", ")
             ));
