@@ -82,7 +82,8 @@ fn mitsuba_names_load_with_mitsuba_defaults() {
         p.budgets,
         Budgets {
             sppc: Some(8),
-            sppp: Some(0)
+            sppp: Some(0),
+            sppi: Some(0)
         }
     );
 
@@ -100,7 +101,8 @@ fn mitsuba_names_load_with_mitsuba_defaults() {
         d.budgets,
         Budgets {
             sppc: None,
-            sppp: Some(16)
+            sppp: Some(16),
+            sppi: None
         }
     );
 }

@@ -206,11 +206,11 @@ impl<'a> Context<'a> {
         let mut out = Vec::new();
         let mut non_finite = 0;
         for k in 0..count {
-            let mut rng = self
-                .film
-                .sensor
-                .sampler
-                .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
+            let mut rng =
+                self.film
+                    .sensor
+                    .sampler
+                    .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
             // jittered strata of the total length within the chunk (see
             // the primary term)
             let u = (k as f32 + rng.next_1d()) / count as f32;
@@ -326,7 +326,9 @@ impl<'a> Context<'a> {
             if f == Vec3::ZERO {
                 continue;
             }
-            let l = scene.integrator.incident_radiance(scene, &ray, &mut rng.clone());
+            let l = scene
+                .integrator
+                .incident_radiance(scene, &ray, &mut rng.clone());
             value[k] = f * l * (common / p);
         }
         if value == [Vec3::ZERO; 2] {
@@ -366,7 +368,10 @@ impl<'a> Context<'a> {
                         &DiffRay::cst(ray),
                         h,
                     );
-                    (Some(em), scene.pdf_emitter_direction(em, m, d, p, si.n.val()))
+                    (
+                        Some(em),
+                        scene.pdf_emitter_direction(em, m, d, p, si.n.val()),
+                    )
                 }
                 None => (None, 0.0),
             },

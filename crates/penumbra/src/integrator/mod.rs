@@ -157,7 +157,9 @@ impl Integrator {
     ) -> glam::Vec3 {
         let store = scene.params.primal();
         match self {
-            Integrator::Path(p) => p.trace::<f32>(scene, &store, DiffRay::cst(ray), 1, rng).val(),
+            Integrator::Path(p) => p
+                .trace::<f32>(scene, &store, DiffRay::cst(ray), 1, rng)
+                .val(),
             Integrator::Direct(_) => match scene.intersect(ray) {
                 Some(hit) => match scene.shape_emitter(hit.shape) {
                     Some(em) => {
