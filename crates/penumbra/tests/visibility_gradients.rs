@@ -1052,6 +1052,10 @@ fn right_angle_scene() -> String {
          f 1 2 3\nf 1 3 4\nf 4 3 5\nf 4 5 6\n",
     )
     .unwrap();
+/// An emitting analytic shape (`shape`, the body of a `<shape>` element
+/// with id `id`) over black, seen by `sensor`: every derivative is the
+/// boundary term of its outline (the sphere's silhouette, the disk's rim).
+fn analytic_scene(sensor: &str, kind: &str, id: &str, body: &str) -> String {
     format!(
         r#"<scene version="3.0.0">
             <integrator type="direct"/>
@@ -1157,4 +1161,139 @@ fn flat_shaded_cube_shadow_matches_finite_differences() {
         0.01,
         (16, 16),
     );
+}
+            <shape type="{kind}" id="{id}">
+                {body}
+                <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter>
+            </shape>
+        </scene>"#
+    )
+}
+
+/// A tilted disk (its rim an ellipse on the film).
+fn disk_scene(sensor: &str) -> String {
+    analytic_scene(
+        sensor,
+        "disk",
+        "disk",
+        r#"<transform name="to_world">
+            <scale x="1.1" y="0.8"/>
+            <rotate z="1" angle="25"/>
+            <rotate x="1" angle="40"/>
+            <translate x="0.15" y="-0.1" z="0.3"/>
+        </transform>"#,
+    )
+}
+
+/// A sphere off the optical axis (its silhouette is not centred on the
+/// projection of its centre).
+fn sphere_scene(sensor: &str) -> String {
+    analytic_scene(
+        sensor,
+        "sphere",
+        "ball",
+        r#"<point name="center" x="0.3" y="-0.2" z="0.4"/>
+           <float name="radius" value="0.9"/>"#,
+    )
+}
+
+/// (1) An emitting disk moved through its `to_world` (a translation): the
+/// rim's boundary term.
+#[test]
+fn disk_translation_matches_finite_differences() {
+    let key = "disk.to_world";
+    compare_with_finite_differences(
+        "disk moved",
+        &disk_scene(&sensor(32, 4)),
+        key,
+        |s| translation_tangent(s, key, [1.0, -0.5, 0.5]).unwrap(),
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (2) An emitting sphere translated (`center`) and scaled (`radius`): the
+/// silhouette circle's boundary term, seen by a pinhole.
+#[test]
+fn sphere_translation_and_scaling_match_finite_differences() {
+    let xml = sphere_scene(&sensor(32, 4));
+    compare_with_finite_differences(
+        "sphere moved",
+        &xml,
+        "ball.center",
+        |_| vec![1.0, -0.5, 0.5],
+        0.01,
+        (1, 16),
+    );
+    compare_with_finite_differences(
+        "sphere scaled",
+        &xml,
+        "ball.radius",
+        |_| vec![1.0],
+        0.01,
+        (1, 16),
+    );
+}
+
+/// The sphere seen by an orthographic camera (its silhouette is a great
+/// circle), translated.
+#[test]
+fn orthographic_sphere_translation_matches_finite_differences() {
+    compare_with_finite_differences(
+        "orthographic sphere moved",
+        &sphere_scene(&orthographic_sensor(32, 4)),
+        "ball.center",
+        |_| vec![1.0, -0.5, 0.5],
+        0.01,
+        (1, 16),
+    );
+}
+
+/// (3) Forward/reverse agreement (see [`assert_modes_agree`]) on the
+/// outlines of analytic shapes: the sphere's `center`, `radius` and
+/// `to_world`, the camera's pose in front of it (pinhole and
+/// orthographic), and the disk's `to_world`.
+#[test]
+fn forward_and_reverse_mode_agree_on_analytic_outlines() {
+    let ball = load(&sphere_scene(&sensor(32, 4)));
+    for key in [
+        "ball.center",
+        "ball.radius",
+        "ball.to_world",
+        "camera.to_world",
+    ] {
+        assert_modes_agree(key, &ball, key, 21);
+    }
+    let ortho = load(&sphere_scene(&orthographic_sensor(32, 4)));
+    for key in ["ball.center", "camera.to_world"] {
+        assert_modes_agree(&format!("orthographic {key}"), &ortho, key, 22);
+    }
+    let disk = load(&disk_scene(&sensor(32, 4)));
+    assert_modes_agree("disk.to_world", &disk, "disk.to_world", 23);
+}
+
+/// Moving spheres and disks seen by a pinhole no longer warn about their
+/// silhouettes; their shadows are still named.
+#[test]
+fn analytic_silhouettes_are_not_named_missing() {
+    let seen = Arc::new(Mutex::new(Vec::<String>::new()));
+    let sink = seen.clone();
+    penumbra::warn::set_warning_sink(Some(Arc::new(move |m: &str| {
+        sink.lock().unwrap().push(m.to_string())
+    })));
+    // an id of its own: the sink also sees the other tests' warnings
+    let xml = analytic_scene(&sensor(8, 1), "sphere", "warned", "");
+    let scene = load(&xml);
+    let key = "warned.center";
+    let d = render_forward(&scene, &[(key, &[1.0, 0.0, 0.0])], &opts(1, 1, 1)).unwrap();
+    let ones = vec![1.0f32; d.data.len()];
+    render_backward(&scene, &ones, Some(&[key]), &opts(1, 1, 1)).unwrap();
+    penumbra::warn::set_warning_sink(None);
+    let seen = seen.lock().unwrap();
+    let ours: Vec<&String> = seen.iter().filter(|m| m.starts_with(key)).collect();
+    assert_eq!(ours.len(), 2, "{seen:?}");
+    for m in ours {
+        assert!(!m.contains("silhouettes"), "{m}");
+        assert!(m.contains("shadows"), "{m}");
+    }
 }

@@ -65,9 +65,10 @@ impl BoundaryTerms {
 /// silent.
 ///
 /// Besides a term the pass does not run at all, the estimators leave out:
-/// the silhouettes of analytic shapes (spheres, disks), seen by the camera
-/// or casting shadows; the shadows of point, spot and directional emitters;
-/// and visibility seen from the second and later vertices of a path.
+/// the shadows cast by analytic shapes (spheres, disks; their silhouettes
+/// seen by a pinhole or orthographic camera are estimated); the shadows of
+/// point, spot and directional emitters; and visibility seen from the
+/// second and later vertices of a path.
 ///
 /// Returns whether any of the keys moves a visibility edge (then the
 /// boundary terms apply).
@@ -77,33 +78,21 @@ pub(crate) fn warn_missing_boundary_terms(
     terms: BoundaryTerms,
 ) -> Result<bool> {
     let mut moving = Vec::new();
-    let mut moving_ids = Vec::new();
     for key in keys {
         let id = scene.params.require(key)?;
         if scene.params.get(id).flags.discontinuous {
             moving.push(*key);
-            moving_ids.push(id);
         }
     }
     if moving.is_empty() {
         return Ok(false);
     }
-    let camera_moves = moving.iter().any(|k| {
-        scene.sensors.iter().any(|s| {
-            k.strip_prefix(s.key.as_str())
-                .is_some_and(|r| r.starts_with('.'))
-        })
-    });
     let analytic = |s: &Shape| s.as_mesh().is_none();
-    let analytic_silhouettes_move = scene.shapes.iter().any(|s| {
-        analytic(s)
-            && (camera_moves || s.geometry_params().iter().any(|id| moving_ids.contains(id)))
-    });
     let mut missing = Vec::new();
     if !terms.primary {
+        // thin lenses, or no primary budget; otherwise the term covers the
+        // edges of meshes and the outlines of spheres and disks
         missing.push("primary visibility (silhouettes seen by the camera)");
-    } else if analytic_silhouettes_move {
-        missing.push("the silhouettes of spheres and disks seen by the camera");
     }
     if !terms.shadow {
         missing.push("shadows");

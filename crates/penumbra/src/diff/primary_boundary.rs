@@ -54,6 +54,46 @@
 //!   fraction between the moving projected end points (any point of the
 //!   projected line gives the same normal component).
 //!
+//! # Outlines of analytic shapes
+//!
+//! Spheres and disks have no edges; their images jump across their
+//! outlines, which are curves in the world: a disk's rim (the unit circle
+//! of its local z = 0 plane through `to_world`), and a sphere's silhouette,
+//! the circle where the view ray is tangent to it (from a pinhole at e,
+//! the points p with (p − c)·(p − e) = 0: centre c + r²/|e − c|² (e − c),
+//! radius r √(1 − r²/|e − c|²), normal e − c; from an orthographic camera,
+//! the great circle normal to the view direction). Both are
+//! `p(φ) = c' + u cos φ + v sin φ` with c', u, v computed in the number
+//! type of the pass from the shape's parameters (a sphere's centre and
+//! radius as its surface reads them: from `to_world` when that carries
+//! derivatives, else from `center` and `radius`) and the camera's, so a
+//! point of fixed φ moves with all of them ([`outline`]).
+//!
+//! Each outline enters the segment machinery above as
+//! `OUTLINE_CHORDS` = 128 chords between the points of angles 2πk/N: they
+//! are projected, clipped, tested for motion, picked by projected length
+//! and backpropagated exactly like edges. Only the sample itself differs:
+//! at fraction s of chord k, the point is the outline's own point at
+//! φ = 2π(k + s)/N, projected (not the chord's point, which lies inside
+//! the curve by a sagitta of up to 3·10⁻⁴ of its radius: more than the
+//! ±ε offset of the jump), with the normal of the outline's image there,
+//! and the sample's weight is multiplied by |dx/dφ| Δφ / chord length, the
+//! ratio of the density along the curve to the density along the chord,
+//! so that the density is exactly that of arc length (no O(1/N²) length
+//! error). The normal velocity is that normal dotted with the velocity
+//! linearly interpolated between the chord's end points (which are true
+//! outline points, moving in `Dual`/`Var`): the velocity is smooth in φ,
+//! so its relative error is at most (2π/N)²/8 ≈ 3·10⁻⁴, far below the
+//! tests' 1 % floor. Reverse mode sums the samples' weights times their
+//! normal per chord end point (a vector, since the normal varies along a
+//! chord) and backpropagates them into the chord's projected end points.
+//! The visibility test asks that nothing be nearer than the outline point
+//! along the camera ray. A disk seen exactly edge-on has an image of zero
+//! area (both sides black, no jump); where its image does not turn
+//! (|dx/dφ| = 0) the sample is dropped. Chords with an end point behind
+//! the near plane are left out, and a pinhole inside a sphere sees no
+//! silhouette.
+//!
 //! The contribution `k_p(x) ΔL v_n · total length / W_p`, averaged over
 //! the samples, is added to every pixel p the filter reaches from x.
 //! `sppp × pixels` samples are taken (`RenderOptions::sppp`, default: the
@@ -67,10 +107,10 @@
 //! instead of splatting them, so that both modes agree up to rounding.
 //!
 //! Not handled here: thin-lens cameras (the edge's image is blurred by the
-//! aperture), the silhouettes of analytic shapes (spheres, disks), edges
-//! cut by the near plane (the cut itself is a moving edge of the image),
-//! and coincident edges of distinct meshes (each is counted). Callers warn
-//! about the first two ([`super::warn_missing_boundary_terms`]). Two jumps
+//! aperture), edges and outlines cut by the near plane (the cut itself is
+//! a moving edge of the image), and coincident edges of distinct meshes
+//! (each is counted). Callers warn about the first
+//! ([`super::warn_missing_boundary_terms`]). Two jumps
 //! of smooth-shaded meshes off the edge table are handled only in part:
 //! the curve where the view direction crosses the horizon of the
 //! interpolated shading normal (BSDFs and area emitters are zero below it;
@@ -91,11 +131,19 @@ use crate::integrator::{RenderOptions, Rendered};
 use crate::math::{DiscreteDistribution, V2, V3};
 use crate::params::ParamView;
 use crate::scene::Scene;
+use crate::sensor::projection::{Projector, Viewpoint};
 use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
+use std::f32::consts::TAU;
 
 /// Sample-stream keys of edge samples: far from the keys of film pixels.
 const STREAM_KEY: u64 = 0xed6e_0000_0000_0000;
+
+/// Chords per outline of an analytic shape (sphere silhouette, disk rim):
+/// they only pick the angle to sample (see the module documentation), so
+/// the estimate does not depend on them beyond the linear interpolation of
+/// the velocity, whose relative error is below (2π/N)²/8 ≈ 3·10⁻⁴.
+const OUTLINE_CHORDS: u32 = 128;
 
 /// Whether this pass estimates the primary boundary term of the render
 /// `opts` describes: the sensor is a pinhole or orthographic camera and
@@ -171,9 +219,13 @@ struct Segment<M> {
     /// The world-space end points (near-clipped), for the visibility test.
     p0: Vec3,
     p1: Vec3,
-    /// The shape and its edge (index in its edge table).
+    /// The shape and its edge (index in its edge table), or for an
+    /// analytic shape the index of the chord of its outline.
     shape: u32,
     edge: u32,
+    /// The outline a chord of an analytic shape approximates (primal):
+    /// samples are taken on it, not on the chord.
+    outline: Option<Outline>,
     /// Whether the shape is smooth-shaded (vertex normals): its
     /// silhouettes may be lined with a shading-horizon sliver (see
     /// [`Context::beyond_horizon`]).
@@ -230,8 +282,138 @@ fn project_edge<R: Real>(
     ))
 }
 
-/// The clipped segments of every candidate edge of every mesh whose image
-/// moves with the parameters `store` seeds in `R`.
+/// The outline of an analytic shape seen by the camera, in world space:
+/// the curve `p(φ) = c + u cos φ + v sin φ`, φ ∈ [0, 2π).
+#[derive(Clone, Copy)]
+struct Outline {
+    c: Vec3,
+    u: Vec3,
+    v: Vec3,
+}
+
+impl Outline {
+    /// The point at angle `phi` and its derivative along the angle.
+    fn at(&self, phi: f32) -> (Vec3, Vec3) {
+        let (sin, cos) = phi.sin_cos();
+        (
+            self.c + self.u * cos + self.v * sin,
+            self.v * cos - self.u * sin,
+        )
+    }
+}
+
+/// The outline of the analytic `shape` seen through `proj`, as `[c, u, v]`
+/// of [`Outline`] in `R` (moving with the shape's and the camera's
+/// parameters); `None` for a mesh, or a sphere around a pinhole.
+///
+/// - A sphere (centre c, radius r, read as its own surface reads them:
+///   from `to_world` when that is tracked, else from `center`, `radius`)
+///   seen from the eye e: the circle of the points p with (p − c)·(p − e)
+///   = 0, centre c + r²/|e − c|² (e − c), radius r √(1 − r²/|e − c|²), in
+///   the plane normal to e − c; from an orthographic camera with view
+///   direction d, the great circle normal to d.
+/// - A disk: its rim, the image of the unit circle of the z = 0 plane
+///   under `to_world` (u, v the images of the local x and y axes).
+///
+/// The angle's origin is a fixed (primal) function of the view, so a
+/// point of fixed angle moves smoothly with the parameters; only the
+/// normal component of its velocity matters.
+fn outline<R: Real>(proj: &Projector<R>, store: &ParamView, shape: &Shape) -> Option<[V3<R>; 3]> {
+    match shape {
+        Shape::Mesh(_) => None,
+        Shape::Disk(d) => {
+            let (c, a0, a1) = d.frame_r::<R>(store);
+            Some([c, a0, a1])
+        }
+        Shape::Sphere(s) => {
+            let (c, r, _) = s.frame_r::<R>(store);
+            let (centre, rho, w) = match proj.viewpoint() {
+                Viewpoint::Point(e) => {
+                    let w = e - c;
+                    let k = r * r / w.length_squared();
+                    if !(k.val() < 1.0) {
+                        return None;
+                    }
+                    (c + w * k, r * (R::cst(1.0) - k).sqrt(), w)
+                }
+                Viewpoint::Direction(d) => (c, r, d),
+            };
+            // an orthonormal basis of the plane normal to w, from the
+            // world axis least aligned with it
+            let a = w.val().abs();
+            let helper = if a.x <= a.y && a.x <= a.z {
+                Vec3::X
+            } else if a.y <= a.z {
+                Vec3::Y
+            } else {
+                Vec3::Z
+            };
+            let u = V3::cst(helper).cross(w).normalize();
+            let v = w.cross(u).normalize();
+            Some([centre, u * rho, v * rho])
+        }
+    }
+}
+
+/// A projected segment: film end points (full-film units, in `R`), world
+/// end points and, for a chord, its outline (primal).
+type Projected<R> = (V2<R>, V2<R>, ([Vec3; 2], Option<Outline>));
+
+/// The film end points (full-film units, in `R`) of chord `k` of the
+/// outline of the analytic `shape` seen by `sensor`, between the outline's
+/// points at angles 2πk/N and 2π(k + 1)/N, their world positions and the
+/// outline (primal); `None` if either end point is behind the near plane.
+fn project_chord<R: Real>(
+    sensor: &Sensor,
+    store: &ParamView,
+    shape: &Shape,
+    k: u32,
+) -> Option<Projected<R>> {
+    let proj = sensor.projector::<R>(store)?;
+    let [c, u, v] = outline(&proj, store, shape)?;
+    let point = |j: u32| {
+        let (sin, cos) = (TAU * j as f32 / OUTLINE_CHORDS as f32).sin_cos();
+        c + u * R::cst(cos) + v * R::cst(sin)
+    };
+    let (w0, w1) = (point(k), point(k + 1));
+    let (q0, q1) = (proj.to_local(w0), proj.to_local(w1));
+    let near = proj.near * (1.0 + 1e-4);
+    if !(q0.z.val() >= near && q1.z.val() >= near) {
+        return None;
+    }
+    let outline = Outline {
+        c: c.val(),
+        u: u.val(),
+        v: v.val(),
+    };
+    Some((
+        proj.film(q0),
+        proj.film(q1),
+        ([w0.val(), w1.val()], Some(outline)),
+    ))
+}
+
+/// [`project_edge`] for edge `index` of a mesh, [`project_chord`] for
+/// chord `index` of the outline of an analytic shape.
+fn project_segment<R: Real>(
+    sensor: &Sensor,
+    store: &ParamView,
+    shape: &Shape,
+    index: u32,
+) -> Option<Projected<R>> {
+    match shape {
+        Shape::Mesh(mesh) => {
+            let (f0, f1, p) =
+                project_edge::<R>(sensor, store, mesh, &mesh.edges.edges[index as usize])?;
+            Some((f0, f1, (p, None)))
+        }
+        _ => project_chord::<R>(sensor, store, shape, index),
+    }
+}
+
+/// The clipped segments of every candidate edge of every mesh, and of the
+/// chords of the outlines of analytic shapes, whose image moves with the
+/// parameters `store` seeds in `R`.
 fn segments<R: EdgeMotion>(
     scene: &Scene,
     sensor: &Sensor,
@@ -243,24 +425,31 @@ fn segments<R: EdgeMotion>(
 ) -> Vec<Segment<R::Motion>> {
     let mut out = Vec::new();
     for (shape_index, shape) in scene.shapes.iter().enumerate() {
-        let Shape::Mesh(mesh) = shape else {
-            continue;
-        };
-        let positions = store.data(mesh.positions);
-        for (edge_index, e) in mesh.edges.edges.iter().enumerate() {
-            match e.kind {
-                EdgeKind::Inert => continue,
-                EdgeKind::Smooth
-                    if !EdgeTable::is_silhouette(e, &mesh.faces, positions, eye)
-                        && !EdgeTable::is_concave(e, &mesh.faces, positions, eye) =>
-                {
-                    continue
-                }
-                _ => {}
+        let candidates: Vec<u32> = match shape {
+            Shape::Mesh(mesh) => {
+                let positions = store.data(mesh.positions);
+                (0..mesh.edges.edges.len() as u32)
+                    .filter(|&i| {
+                        let e = &mesh.edges.edges[i as usize];
+                        match e.kind {
+                            EdgeKind::Inert => false,
+                            EdgeKind::Smooth => {
+                                EdgeTable::is_silhouette(e, &mesh.faces, positions, eye)
+                                    || EdgeTable::is_concave(e, &mesh.faces, positions, eye)
+                            }
+                            _ => true,
+                        }
+                    })
+                    .collect()
             }
-            let Some((f0, f1, motion, [p0, p1])) =
-                R::motion(|| project_edge::<R>(sensor, store, mesh, e), scale)
-            else {
+            _ => (0..OUTLINE_CHORDS).collect(),
+        };
+        let smooth = shape.as_mesh().is_some_and(|m| m.normals.is_some());
+        for edge_index in candidates {
+            let Some((f0, f1, motion, ([p0, p1], outline))) = R::motion(
+                || project_segment::<R>(sensor, store, shape, edge_index),
+                scale,
+            ) else {
                 continue;
             };
             let (a, b) = (to_pixels(f0), to_pixels(f1));
@@ -278,8 +467,9 @@ fn segments<R: EdgeMotion>(
                 p0,
                 p1,
                 shape: shape_index as u32,
-                edge: edge_index as u32,
-                smooth: mesh.normals.is_some(),
+                edge: edge_index,
+                outline,
+                smooth,
             };
             let len = seg.length();
             if len > 0.0 && len.is_finite() {
@@ -341,7 +531,7 @@ pub(crate) fn add_primary_boundary(
     let mut acc = vec![0.0f64; image.data.len()];
     image.non_finite_samples += ctx.run(opts, |seg, splat, pixel, w| {
         let (da, db) = seg.motion;
-        let v_n = seg.n.dot(da + (db - da) * splat.s);
+        let v_n = splat.n.dot(da + (db - da) * splat.s);
         for c in 0..3 {
             acc[3 * pixel + c] += w * (splat.value[c] * v_n) as f64;
         }
@@ -360,13 +550,14 @@ pub(crate) fn add_primary_boundary(
 ///
 /// The term is `Σ_samples Σ_p δI_p k_p(x)/W_p · ΔL/pdf · ⟨dx/dθ, n⟩`, the
 /// forward mode estimate of the same samples (same edges, same positions)
-/// contracted with δI. Only x moves with θ, and it is the point at the
-/// fixed fraction s between the projected end points: `⟨x, n⟩ = (1 − s)
-/// ⟨a, n⟩ + s ⟨b, n⟩` with n held fixed. So the samples' weights (without
-/// the motion) are summed per segment and end point, and each segment is
-/// recorded once more on the tape and `⟨a, n⟩`, `⟨b, n⟩` are
-/// backpropagated with those sums, in segment order (the result does not
-/// depend on the thread count).
+/// contracted with δI. Only x moves with θ, and its velocity is that of
+/// the point at the fixed fraction s between the projected end points:
+/// `⟨dx, n⟩ = (1 − s) ⟨da, n⟩ + s ⟨db, n⟩` with n held fixed (the edge's
+/// normal, or the outline's at the sample). So the samples' weights
+/// (without the motion) times n are summed per segment and end point (2D
+/// vectors), and each segment is recorded once more on the tape and its
+/// end points are backpropagated with those sums, in segment order (the
+/// result does not depend on the thread count).
 pub(crate) fn add_primary_boundary_gradients(
     scene: &Scene,
     store: &ParamView,
@@ -377,38 +568,46 @@ pub(crate) fn add_primary_boundary_gradients(
     let Some(ctx) = Context::<()>::new::<Var>(scene, store, opts)? else {
         return Ok(0);
     };
-    let mut weights = vec![[0.0f64; 2]; ctx.segs.len()];
+    // per segment, Σ weight · (1 − s) n and Σ weight · s n (x, y): the
+    // normal is the segment's for an edge, the outline's at the sample for
+    // a chord
+    let mut weights = vec![[0.0f64; 4]; ctx.segs.len()];
     let non_finite = ctx.run(opts, |_, splat, pixel, w| {
         let adjoint: f32 = (0..3)
             .map(|c| d_image[3 * pixel + c] * splat.value[c])
             .sum();
         let a = w * adjoint as f64;
         let s = splat.s as f64;
+        let (nx, ny) = (splat.n.x as f64, splat.n.y as f64);
         let ws = &mut weights[splat.seg as usize];
-        ws[0] += a * (1.0 - s);
-        ws[1] += a * s;
+        ws[0] += a * (1.0 - s) * nx;
+        ws[1] += a * (1.0 - s) * ny;
+        ws[2] += a * s * nx;
+        ws[3] += a * s * ny;
     })?;
-    for (seg, [wa, wb]) in ctx.segs.iter().zip(weights) {
-        if wa == 0.0 && wb == 0.0 {
+    for (seg, ws) in ctx.segs.iter().zip(weights) {
+        if ws.iter().all(|&w| w == 0.0) {
             continue;
         }
         clear_tape();
-        let projected = scene.shapes[seg.shape as usize].as_mesh().and_then(|mesh| {
-            project_edge::<Var>(
-                ctx.film.sensor,
-                store,
-                mesh,
-                &mesh.edges.edges[seg.edge as usize],
-            )
-        });
+        let projected = project_segment::<Var>(
+            ctx.film.sensor,
+            store,
+            &scene.shapes[seg.shape as usize],
+            seg.edge,
+        );
         let Some((f0, f1, _)) = projected else {
             continue;
         };
-        // ⟨to_pixels(f), n⟩ up to a constant
-        let n = seg.n * ctx.film.scale;
-        let normal = |f: V2<Var>| f.x * n.x + f.y * n.y;
+        // ⟨to_pixels(f), n⟩ up to a constant, per coordinate
+        let k = ctx.film.scale;
         backward(
-            &[(normal(f0), wa as f32), (normal(f1), wb as f32)],
+            &[
+                (f0.x, (ws[0] * k.x as f64) as f32),
+                (f0.y, (ws[1] * k.y as f64) as f32),
+                (f1.x, (ws[2] * k.x as f64) as f32),
+                (f1.y, (ws[3] * k.y as f64) as f32),
+            ],
             |id, i, g| sums[id.0 as usize][i] += g as f64,
         );
     }
@@ -422,6 +621,8 @@ struct Splat {
     x: Vec2,
     seg: u32,
     s: f32,
+    /// The unit normal the jump and the velocity are measured along.
+    n: Vec2,
     value: [f32; 3],
 }
 
@@ -430,6 +631,9 @@ struct Splat {
 struct Context<'a, M> {
     scene: &'a Scene,
     film: FilmSplatter<'a>,
+    /// The camera's projection (primal values, in `Dual` to differentiate
+    /// the image of an outline along its angle).
+    proj: Projector<Dual>,
     segs: Vec<Segment<M>>,
     dist: DiscreteDistribution,
     /// Total projected length (pixels): the inverse of the density.
@@ -468,8 +672,12 @@ impl<'a, M: Sync> Context<'a, M> {
         let Some(dist) = DiscreteDistribution::new(&lengths) else {
             return Ok(None);
         };
+        let Some(proj) = sensor.projector::<Dual>(&scene.params.primal()) else {
+            return Ok(None);
+        };
         Ok(Some(Context {
             scene,
+            proj,
             segs,
             total: dist.sum() as f32,
             dist,
@@ -551,6 +759,39 @@ impl<'a, M: Sync> Context<'a, M> {
         }
     }
 
+    /// The sample at fraction `s` of the chord `seg` of `outline`: the film
+    /// position (crop-window pixels) of the outline's point at the same
+    /// fraction of the chord's angle range, the unit normal of the
+    /// outline's image there (on the side of the chord's normal), the
+    /// ratio of the density to sample it by (arc length over the whole
+    /// outline) to the density it was sampled by (chord length), and the
+    /// world point; `None` where the image does not turn (a disk seen
+    /// edge-on at the ends of its image).
+    fn outline_point(
+        &self,
+        seg: &Segment<M>,
+        outline: &Outline,
+        s: f32,
+    ) -> Option<(Vec2, Vec2, f32, Vec3)> {
+        let dphi = TAU / OUTLINE_CHORDS as f32;
+        let (p, dp) = outline.at((seg.edge as f32 + s) * dphi);
+        let q = V3::new(
+            Dual::new(p.x, dp.x),
+            Dual::new(p.y, dp.y),
+            Dual::new(p.z, dp.z),
+        );
+        let f = self.proj.film(self.proj.to_local(q));
+        let x = self.film.to_pixels(Vec2::new(f.x.v, f.y.v));
+        let dx = Vec2::new(f.x.d, f.y.d) * self.film.scale;
+        let speed = dx.length();
+        let chord = (seg.b - seg.a).length();
+        if !(speed > 0.0 && speed.is_finite() && x.is_finite() && chord > 0.0) {
+            return None;
+        }
+        let n = Vec2::new(-dx.y, dx.x) / speed;
+        Some((x, n, speed * dphi / chord, p))
+    }
+
     /// The non-zero splats of chunk `c` and the number of non-finite ones.
     fn chunk(&self, c: usize, count: u32) -> (Vec<Splat>, usize) {
         let scene = self.scene;
@@ -571,17 +812,29 @@ impl<'a, M: Sync> Context<'a, M> {
             let (i, _, u) = self.dist.sample_reuse(u.min(1.0 - f32::EPSILON));
             let seg = &self.segs[i];
             let s = seg.s0 + u * (seg.s1 - seg.s0);
-            let (x, n) = (seg.a + (seg.b - seg.a) * s, seg.n);
+            // the point, its normal, the ratio of the true density to the
+            // sampled one, and the world point seen there (for an edge,
+            // the line it lies on)
+            let (x, n, ratio, point) = match &seg.outline {
+                None => (seg.a + (seg.b - seg.a) * s, seg.n, 1.0, None),
+                Some(outline) => {
+                    let Some((x, n, ratio, p)) = self.outline_point(seg, outline, s) else {
+                        continue;
+                    };
+                    (x, n, ratio, Some(p))
+                }
+            };
             // the edge must be what the camera sees at x
             let ray = self
                 .film
                 .camera_sample(x)
                 .ray::<f32>(&scene.params.primal())
                 .val();
-            if let (Some(hit), Some(t_edge)) = (
-                scene.intersect(&ray),
-                distance_along(ray.o, ray.d, seg.p0, seg.p1),
-            ) {
+            let t_edge = match point {
+                None => distance_along(ray.o, ray.d, seg.p0, seg.p1),
+                Some(p) => Some((p - ray.o).dot(ray.d) / ray.d.dot(ray.d)),
+            };
+            if let (Some(hit), Some(t_edge)) = (scene.intersect(&ray), t_edge) {
                 if hit.t < t_edge * (1.0 - 1e-3) {
                     continue;
                 }
@@ -601,7 +854,7 @@ impl<'a, M: Sync> Context<'a, M> {
             // the jump from the side n points to, to the side it points
             // away from (module documentation)
             let jump = radiance(-1.0) - radiance(1.0);
-            let value = jump * self.total;
+            let value = jump * (self.total * ratio);
             if !value.is_finite() {
                 non_finite += 1;
             } else if value != Vec3::ZERO {
@@ -609,6 +862,7 @@ impl<'a, M: Sync> Context<'a, M> {
                     x,
                     seg: i as u32,
                     s,
+                    n,
                     value: value.to_array(),
                 });
             }

@@ -18,6 +18,13 @@ pub(crate) struct Projector<R> {
     pub near: f32,
 }
 
+/// [`Projector::viewpoint`]: the eye point (pinhole) or the unit view
+/// direction (orthographic), in `R`.
+pub(crate) enum Viewpoint<R> {
+    Point(V3<R>),
+    Direction(V3<R>),
+}
+
 enum Kind<R> {
     /// `tan(x_fov / 2)`, the principal point offset, the aspect ratio.
     Pinhole {
@@ -101,6 +108,19 @@ impl<R: Real> Projector<R> {
                 (R::cst(1.0) - q.x) * 0.5,
                 (R::cst(1.0) - q.y * *aspect) * 0.5,
             ),
+        }
+    }
+
+    /// Where the rays come from, in `R` (moving with the pose): the eye
+    /// point of a pinhole, the unit direction the rays travel for an
+    /// orthographic camera. Silhouettes of analytic shapes depend on it.
+    pub fn viewpoint(&self) -> Viewpoint<R> {
+        let m = &self.to_world.0;
+        match self.kind {
+            Kind::Pinhole { .. } => Viewpoint::Point(self.to_world.point(V3::zero())),
+            Kind::Orthographic { .. } => {
+                Viewpoint::Direction(V3::new(m[2], m[6], m[10]).normalize())
+            }
         }
     }
 

@@ -198,7 +198,7 @@ impl ShapeT for Disk {
 
 impl Disk {
     /// Centre and images of the local x and y axes, in `R`.
-    fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, V3<R>, V3<R>) {
+    pub(crate) fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, V3<R>, V3<R>) {
         let id = self.to_world;
         let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
         (

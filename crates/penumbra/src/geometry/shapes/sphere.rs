@@ -132,7 +132,7 @@ impl Sphere {
     /// Centre, radius and the images of the local axes (unit), in `R`:
     /// from `to_world` when its reads carry derivatives, else from
     /// `center` and `radius` with the rotation a constant.
-    fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, R, [V3<R>; 3]) {
+    pub(crate) fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, R, [V3<R>; 3]) {
         if R::tracks(store, self.to_world) {
             let m = |r: usize, c: usize| -> R { store.read(self.to_world, 4 * r + c) };
             let col = |c: usize| V3::new(m(0, c), m(1, c), m(2, c));
