@@ -1052,10 +1052,6 @@ fn right_angle_scene() -> String {
          f 1 2 3\nf 1 3 4\nf 4 3 5\nf 4 5 6\n",
     )
     .unwrap();
-/// An emitting analytic shape (`shape`, the body of a `<shape>` element
-/// with id `id`) over black, seen by `sensor`: every derivative is the
-/// boundary term of its outline (the sphere's silhouette, the disk's rim).
-fn analytic_scene(sensor: &str, kind: &str, id: &str, body: &str) -> String {
     format!(
         r#"<scene version="3.0.0">
             <integrator type="direct"/>
@@ -1162,6 +1158,15 @@ fn flat_shaded_cube_shadow_matches_finite_differences() {
         (16, 16),
     );
 }
+
+/// An emitting analytic shape (`shape`, the body of a `<shape>` element
+/// with id `id`) over black, seen by `sensor`: every derivative is the
+/// boundary term of its outline (the sphere's silhouette, the disk's rim).
+fn analytic_scene(sensor: &str, kind: &str, id: &str, body: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+            <integrator type="direct"/>
+            {sensor}
             <shape type="{kind}" id="{id}">
                 {body}
                 <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter>
