@@ -7,7 +7,10 @@
 //! options, else from the integrator (`sppc`, `sppp`; see
 //! `integrator::Budgets`).
 
-use super::{primary_boundary, shadow_boundary, warn_missing_boundary_terms, BoundaryTerms};
+use super::{
+    delta_shadow_boundary, primary_boundary, shadow_boundary, warn_missing_boundary_terms,
+    BoundaryTerms,
+};
 use crate::ad::Dual;
 use crate::error::{Error, Result};
 use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
@@ -41,6 +44,9 @@ pub fn render_forward(
     }
     if edges_move && terms.shadow {
         shadow_boundary::add_shadow_boundary(scene, &store, opts, &mut image)?;
+    }
+    if edges_move && terms.delta_shadow {
+        delta_shadow_boundary::add_delta_shadow_boundary(scene, &store, opts, &mut image)?;
     }
     Ok(image)
 }

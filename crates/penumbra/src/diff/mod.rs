@@ -6,6 +6,7 @@
 //! gradients for every differentiable parameter.
 
 mod check;
+mod delta_shadow_boundary;
 mod forward;
 mod prb;
 mod primary_boundary;
@@ -45,6 +46,9 @@ pub(crate) struct BoundaryTerms {
     pub primary: bool,
     /// Edges seen from the first vertex: shadows ([`shadow_boundary`]).
     pub shadow: bool,
+    /// Shadows of point, spot and directional emitters
+    /// ([`delta_shadow_boundary`]).
+    pub delta_shadow: bool,
 }
 
 impl BoundaryTerms {
@@ -53,6 +57,7 @@ impl BoundaryTerms {
         Ok(BoundaryTerms {
             primary: primary_boundary::applies(scene, opts)?,
             shadow: shadow_boundary::applies(scene, opts)?,
+            delta_shadow: delta_shadow_boundary::applies(scene, opts)?,
         })
     }
 }
@@ -66,9 +71,8 @@ impl BoundaryTerms {
 ///
 /// Besides a term the pass does not run at all, the estimators leave out:
 /// the shadows cast by analytic shapes (spheres, disks; their silhouettes
-/// seen by a pinhole or orthographic camera are estimated); the shadows of
-/// point, spot and directional emitters; and visibility seen from the
-/// second and later vertices of a path.
+/// seen by a pinhole or orthographic camera are estimated), and visibility
+/// seen from the second and later vertices of a path.
 ///
 /// Returns whether any of the keys moves a visibility edge (then the
 /// boundary terms apply).
@@ -94,15 +98,12 @@ pub(crate) fn warn_missing_boundary_terms(
         // edges of meshes and the outlines of spheres and disks
         missing.push("primary visibility (silhouettes seen by the camera)");
     }
-    if !terms.shadow {
+    let area_lights = scene.emitters.iter().any(|e| !e.is_delta());
+    let delta_lights = scene.emitters.iter().any(|e| e.is_delta());
+    if (area_lights && !terms.shadow) || (delta_lights && !terms.delta_shadow) {
         missing.push("shadows");
-    } else {
-        if scene.emitters.iter().any(|e| e.is_delta()) {
-            missing.push("the shadows of point, spot and directional emitters");
-        }
-        if scene.shapes.iter().any(analytic) {
-            missing.push("the shadows cast by spheres and disks");
-        }
+    } else if scene.shapes.iter().any(analytic) {
+        missing.push("the shadows cast by spheres and disks");
     }
     if scene.integrator.traces_indirect_light() {
         missing.push("indirect visibility (edges seen after a bounce)");

@@ -21,7 +21,10 @@
 //! The boundary term of primary visibility is added by
 //! `primary_boundary.rs`, which records one edge at a time.
 
-use super::{primary_boundary, shadow_boundary, warn_missing_boundary_terms, BoundaryTerms};
+use super::{
+    delta_shadow_boundary, primary_boundary, shadow_boundary, warn_missing_boundary_terms,
+    BoundaryTerms,
+};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
@@ -162,6 +165,11 @@ pub fn render_backward(
     }
     if edges_move && terms.shadow {
         non_finite_samples += shadow_boundary::add_shadow_boundary_gradients(
+            scene, &store, &d_image, opts, &mut sums,
+        )?;
+    }
+    if edges_move && terms.delta_shadow {
+        non_finite_samples += delta_shadow_boundary::add_delta_shadow_boundary_gradients(
             scene, &store, &d_image, opts, &mut sums,
         )?;
     }

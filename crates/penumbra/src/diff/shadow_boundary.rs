@@ -94,16 +94,70 @@ const SIDE_ANGLE: f32 = 1e-4;
 /// vertex is lit, an emitter that is not a point, and a budget that is not
 /// zero.
 pub(crate) fn applies(scene: &Scene, opts: &RenderOptions) -> Result<bool> {
+    Ok(first_vertex_is_lit(scene, opts)? && scene.emitters.iter().any(|e| !e.is_delta()))
+}
+
+/// Whether the boundary terms of the visibility seen from the first vertex
+/// can apply to the render `opts` describes: a pinhole or orthographic
+/// camera, a radiance integrator whose first vertex is lit, and a budget
+/// `sppi` that is not zero.
+pub(super) fn first_vertex_is_lit(scene: &Scene, opts: &RenderOptions) -> Result<bool> {
     let sensor = scene.sensor(opts.sensor)?;
     let lit = match &scene.integrator {
         Integrator::Path(p) => p.max_depth >= 2,
         Integrator::Direct(_) => true,
         Integrator::Aov(_) => false,
     };
-    Ok(opts.sppi != Some(0)
-        && lit
-        && scene.emitters.iter().any(|e| !e.is_delta())
-        && sensor.projector::<f32>(&scene.params.primal()).is_some())
+    Ok(opts.sppi != Some(0) && lit && sensor.projector::<f32>(&scene.params.primal()).is_some())
+}
+
+/// The edges that may cast shadows: every non-inert edge of every mesh
+/// that is not itself an emitter, picked by length.
+pub(super) struct CandidateEdges {
+    /// (shape, edge index) and their lengths' distribution.
+    edges: Vec<(u32, u32)>,
+    dist: DiscreteDistribution,
+    /// Total length: the inverse of the density per unit length.
+    pub total: f32,
+}
+
+impl CandidateEdges {
+    pub fn new(scene: &Scene) -> Option<CandidateEdges> {
+        let primal = scene.params.primal();
+        let mut edges = Vec::new();
+        let mut lengths = Vec::new();
+        for (s, shape) in scene.shapes.iter().enumerate() {
+            let Shape::Mesh(mesh) = shape else { continue };
+            if scene.shape_emitter(s as u32).is_some() {
+                continue;
+            }
+            for (i, e) in mesh.edges.edges.iter().enumerate() {
+                if e.kind == EdgeKind::Inert {
+                    continue;
+                }
+                let (p0, p1) = end_points::<f32>(mesh, &primal, i as u32);
+                let len = (p1.val() - p0.val()).length();
+                if len > 0.0 && len.is_finite() {
+                    edges.push((s as u32, i as u32));
+                    lengths.push(len);
+                }
+            }
+        }
+        let dist = DiscreteDistribution::new(&lengths)?;
+        Some(CandidateEdges {
+            edges,
+            total: dist.sum() as f32,
+            dist,
+        })
+    }
+
+    /// The edge at `u` ∈ [0, 1) of the total length: (shape, edge, the
+    /// fraction along it, its length).
+    pub fn sample(&self, u: f32) -> (u32, u32, f32, f32) {
+        let (i, pmf, t) = self.dist.sample_reuse(u);
+        let (shape, edge) = self.edges[i];
+        (shape, edge, t, pmf * self.total)
+    }
 }
 
 /// One sample that found a first vertex behind an edge: what both modes
@@ -134,10 +188,7 @@ struct Context<'a> {
     /// The camera's projection, with constant parameters.
     proj: Projector<f32>,
     proj_dual: Projector<Dual>,
-    /// Candidate edges (shape, edge index) and their lengths' distribution.
-    edges: Vec<(u32, u32)>,
-    dist: DiscreteDistribution,
-    total: f32,
+    edges: CandidateEdges,
     /// Probability of a uniform direction at m instead of an emitter's.
     uniform: f32,
     seed: u64,
@@ -155,26 +206,7 @@ impl<'a> Context<'a> {
         };
         let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
         let film = FilmSplatter::new(sensor, opts.sppi.unwrap_or(spp), opts)?;
-        let mut edges = Vec::new();
-        let mut lengths = Vec::new();
-        for (s, shape) in scene.shapes.iter().enumerate() {
-            let Shape::Mesh(mesh) = shape else { continue };
-            if scene.shape_emitter(s as u32).is_some() {
-                continue;
-            }
-            for (i, e) in mesh.edges.edges.iter().enumerate() {
-                if e.kind == EdgeKind::Inert {
-                    continue;
-                }
-                let (p0, p1) = end_points::<f32>(mesh, &primal, i as u32);
-                let len = (p1.val() - p0.val()).length();
-                if len > 0.0 && len.is_finite() {
-                    edges.push((s as u32, i as u32));
-                    lengths.push(len);
-                }
-            }
-        }
-        let Some(dist) = DiscreteDistribution::new(&lengths) else {
+        let Some(edges) = CandidateEdges::new(scene) else {
             return Ok(None);
         };
         Ok(Some(Context {
@@ -183,8 +215,6 @@ impl<'a> Context<'a> {
             proj,
             proj_dual,
             edges,
-            total: dist.sum() as f32,
-            dist,
             uniform: if scene.integrator.traces_indirect_light() {
                 0.5
             } else {
@@ -231,8 +261,7 @@ impl<'a> Context<'a> {
     fn sample(&self, u: f32, rng: &mut crate::sampler::SampleStream) -> Option<Sample> {
         let scene = self.scene;
         let primal = scene.params.primal();
-        let (i, _, t) = self.dist.sample_reuse(u);
-        let (shape, edge) = self.edges[i];
+        let (shape, edge, t, _) = self.edges.sample(u);
         let mesh = scene.shapes[shape as usize].as_mesh()?;
         let (p0, p1) = end_points::<f32>(mesh, &primal, edge);
         let (p0, p1) = (p0.val(), p1.val());
@@ -305,7 +334,7 @@ impl<'a> Context<'a> {
         }
         let n = cross / sin_e;
         let jac = film_jacobian(&self.proj_dual, x3, si.n.val(), self.film.scale);
-        let common = jac * r_m * sin_e * self.total / cos_x;
+        let common = jac * r_m * sin_e * self.edges.total / cos_x;
 
         let bsdf = scene.shape_bsdf(hit.shape);
         let ctx = bsdf.context(&primal, &si);
@@ -412,7 +441,7 @@ impl<'a> Context<'a> {
 }
 
 /// The world end points of edge `edge` of `mesh`, in `R`.
-fn end_points<R: Real>(mesh: &Mesh, store: &ParamView, edge: u32) -> (V3<R>, V3<R>) {
+pub(super) fn end_points<R: Real>(mesh: &Mesh, store: &ParamView, edge: u32) -> (V3<R>, V3<R>) {
     let e = &mesh.edges.edges[edge as usize];
     let (_, tri) = mesh.triangle_r::<R>(store, e.face);
     let k = e.corner as usize;

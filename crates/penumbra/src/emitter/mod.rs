@@ -324,7 +324,26 @@ impl EmitterT for Emitter {
     }
 }
 
+/// Where the light of a delta emitter comes from: all its rays leave one
+/// point, or all travel along one direction.
+#[derive(Clone, Copy, Debug)]
+pub enum DeltaOrigin<R> {
+    Point(V3<R>),
+    Direction(Vec3),
+}
+
 impl Emitter {
+    /// The origin of a point, spot or directional emitter's light, in `R`
+    /// (a point light's `position` is a parameter); `None` for the others.
+    pub(crate) fn delta_origin<R: Real>(&self, store: &ParamView) -> Option<DeltaOrigin<R>> {
+        match self {
+            Emitter::Point(p) => Some(DeltaOrigin::Point(store.read3(p.position, 0))),
+            Emitter::Spot(s) => Some(DeltaOrigin::Point(V3::cst(s.to_world.point(Vec3::ZERO)))),
+            Emitter::Directional(d) => Some(DeltaOrigin::Direction(d.direction)),
+            _ => None,
+        }
+    }
+
     /// Builds an `<emitter>` node (and checks that all its parameters were
     /// used). `shape` is the index of the shape an area emitter is
     /// attached to (`None` at scene level). Every plugin also accepts
