@@ -40,7 +40,7 @@ use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Dual, Real, Var};
 use crate::emitter::DeltaOrigin;
 use crate::error::Result;
-use crate::geometry::edges::{EdgeKind, EdgeTable, Eye};
+use crate::geometry::edges::{EdgeTable, Eye};
 use crate::geometry::{DiffRay, Hit, Ray};
 use crate::integrator::{RenderOptions, Rendered};
 use crate::math::{V2, V3};
@@ -193,9 +193,9 @@ impl<'a> Context<'a> {
             DeltaOrigin::Direction(d) => (d, Eye::Direction(d)),
         };
         let e = &mesh.edges.edges[edge as usize];
-        if e.kind == EdgeKind::Smooth
-            && !EdgeTable::is_silhouette(e, &mesh.faces, primal.data(mesh.positions), eye)
-        {
+        // only an edge the light grazes casts a shadow edge (a sharp edge
+        // seen from the light between two faces is shadowed on both sides)
+        if !EdgeTable::is_silhouette(e, &mesh.faces, primal.data(mesh.positions), eye) {
             return None;
         }
         let scale = 1.0 + m.abs().max_element();
@@ -206,6 +206,11 @@ impl<'a> Context<'a> {
             tmax: f32::INFINITY,
         };
         let hit = scene.intersect(&ray)?;
+        // a face of the edge itself (grazed at the terminator of a flat
+        // mesh) is no receiver: that jump is the primary term's
+        if hit.shape == shape && (hit.prim == e.face || hit.prim == e.other_face) {
+            return None;
+        }
         let xp = ray.at(hit.t);
         // the curve and its tangent along the edge: the same map in dual
         // numbers whose tangent is d m / d t

@@ -291,9 +291,7 @@ impl<'a> Context<'a> {
         // a smooth edge matters only where it is a silhouette from the light
         let faces = &mesh.faces;
         let e = &mesh.edges.edges[edge as usize];
-        if e.kind == EdgeKind::Smooth
-            && !EdgeTable::is_silhouette(e, faces, primal.data(mesh.positions), Eye::Direction(d))
-        {
+        if !EdgeTable::is_silhouette(e, faces, primal.data(mesh.positions), Eye::Direction(d)) {
             return None;
         }
 
@@ -306,6 +304,10 @@ impl<'a> Context<'a> {
             tmax: f32::INFINITY,
         };
         let hx = scene.intersect(&back)?;
+        // a face of the edge itself (grazed) is no receiver
+        if hx.shape == shape && (hx.prim == e.face || hx.prim == e.other_face) {
+            return None;
+        }
         let xp = back.at(hx.t);
         let q = self.proj.to_local(V3::cst(xp));
         if !(q.z.val() > self.proj.near) {
