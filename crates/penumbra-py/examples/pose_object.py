@@ -9,8 +9,8 @@ flat, floating under the museum environment map. `pn.Pose` maps a latent
 translation t and rotation vector r (radians, about the mesh's centroid)
 onto its vertex positions; `pn.render_backward` gives the gradient with
 respect to the positions and `pose.backprop` turns it into (dL/dt, dL/dr)
-for Adam. Under a distant environment a flat facet's radiance does not
-change when it moves, so the translation gradient comes entirely from the
+for Adam (the loop, shared with pose_camera.py, is in pose_demo.py). Under
+a distant environment a flat facet's radiance does not change when it moves, so the translation gradient comes entirely from the
 boundary term of primary visibility (the silhouette and the facet edges,
 `sppp` edge samples per pixel): with --sppp 0 the object does not move
 back. With --check the script exits with status 1 unless the translation
@@ -18,86 +18,19 @@ error is below --max-translation-error (default 0.02) and the rotation
 error below --max-rotation-error (default 2 degrees).
 """
 
-import argparse
-import os
-import pathlib
 import sys
-import time
 
-import numpy as np
-
-import penumbra as pn
-
-HERE = pathlib.Path(__file__).resolve().parent
-SCENE = HERE.parents[2] / "scenes" / "pose_object.xml"
-KEY = "object.vertex_positions"
-INIT_T = [0.12, -0.08, 0.1]
-INIT_R_DEG = [4.0, -7.0, 3.0]
-
-
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--iterations", type=int, default=150)
-    ap.add_argument("--res", type=int, default=64)
-    ap.add_argument("--spp", type=int, default=8)
-    ap.add_argument("--sppp", type=int, default=4, help="edge samples per pixel (0: no boundary term)")
-    ap.add_argument("--out", type=pathlib.Path, default=None, help="write target / initial / final PNGs here")
-    ap.add_argument("--check", action="store_true", help="exit 1 if not converged")
-    ap.add_argument("--max-translation-error", type=float, default=0.02)
-    ap.add_argument("--max-rotation-error", type=float, default=2.0, help="degrees")
-    args = ap.parse_args(argv)
-
-    t0 = time.perf_counter()
-    scene = pn.load_file(SCENE, res=args.res, max_depth=2)
-    params = pn.traverse(scene)
-    # the scene as loaded is the true pose (t = r = 0)
-    pose = pn.Pose(params, KEY)
-    target = pn.render(scene, spp=128, seed=1 << 20)
-
-    opt = pn.ad.Adam(lr=0.01)
-    opt["t"] = np.array(INIT_T)
-    opt["r"] = np.radians(INIT_R_DEG)
-    # Adam moves each coordinate by about its learning rate per step
-    opt.set_learning_rate({"t": 0.01, "r": np.radians(0.5)})
-
-    def errors():
-        # the truth is t = 0, r = 0: |t| and the rotation angle |r|
-        return np.linalg.norm(opt["t"]), np.degrees(np.linalg.norm(opt["r"]))
-
-    if args.out is not None:
-        os.makedirs(args.out, exist_ok=True)
-        pn.write_image(args.out / "target.png", target)
-        params.update(pose.apply(opt["t"], opt["r"]))
-        pn.write_image(args.out / "initial.png", pn.render(scene, spp=128, seed=1))
-    print(f"start: translation error {errors()[0]:.4f}, rotation error {errors()[1]:.2f} deg")
-    for it in range(args.iterations):
-        t, r = opt["t"], opt["r"]
-        params.update(pose.apply(t, r))
-        img = pn.render(scene, spp=args.spp, seed=it)
-        loss, d_img = pn.losses.mse(img, target)
-        grads = pn.render_backward(
-            scene, d_img, spp=args.spp, seed=it, keys=pose.keys, sppp=args.sppp
-        )
-        d_t, d_r = pose.backprop(grads, t, r)
-        opt.step({"t": d_t, "r": d_r})
-        if it % 10 == 0 or it == args.iterations - 1:
-            et, er = errors()
-            print(f"iter {it:3d}  loss {loss:.3e}  translation error {et:.4f}  rotation error {er:.2f} deg")
-    params.update(pose.apply(opt["t"], opt["r"]))
-
-    et, er = errors()
-    print(
-        f"recovered t = {np.round(opt['t'], 4)}, r = {np.round(np.degrees(opt['r']), 3)} deg; "
-        f"translation error {et:.4f}, rotation error {er:.3f} deg"
-    )
-    print(f"time {time.perf_counter() - t0:.2f} s")
-    if args.out is not None:
-        pn.write_image(args.out / "final.png", pn.render(scene, spp=128, seed=1))
-    if args.check and not (et < args.max_translation_error and er < args.max_rotation_error):
-        print("NOT CONVERGED", file=sys.stderr)
-        return 1
-    return 0
-
+import pose_demo
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(
+        pose_demo.main(
+            __doc__,
+            "pose_object.xml",
+            "object.vertex_positions",
+            init_t=[0.12, -0.08, 0.1],
+            init_r_deg=[4.0, -7.0, 3.0],
+            iterations=150,
+            max_rotation_error=2.0,
+        )
+    )

@@ -47,7 +47,7 @@ def test_object_pose_example_recovers_the_pose(tmp_path):
     # starts 0.1755 away and turned by 8.6 degrees
     out = run(
         "pose_object.py",
-        *("--res", "32", "--iterations", "100"),
+        *("--res", "32", "--iterations", "150"),
         *("--max-translation-error", "0.03", "--max-rotation-error", "3"),
         *("--out", str(tmp_path)),
     )
@@ -69,7 +69,7 @@ def test_camera_pose_example_recovers_the_pose():
     # starts 0.1755 away and turned by 7.8 degrees
     out = run(
         "pose_camera.py",
-        *("--res", "32", "--iterations", "100"),
+        *("--res", "32", "--iterations", "150"),
         *("--max-translation-error", "0.03"),
     )
     t, r = final_errors(out)
