@@ -18,17 +18,21 @@ repetition so that drifts of the load hit both):
   Mitsuba   scripts/mitsuba/geom_fwd.py (Mitsuba 3.9.1, llvm_ad_rgb): the
             shared kit's forward-mode set-up (bench.py grad_geom_fwd) with
             `direct_projective` at its defaults (sppc = sppp = sppi = the
-            runtime spp, octree guiding) and with sppi = 0 (no shadow /
-            indirect visibility term: the terms Penumbra has today), 128²,
+            runtime spp, octree guiding) and with sppi = 0 (without the
+            boundary term of the visibility seen from the first vertex,
+            i.e. of shadows), 128²,
             --spp samples per pixel. One first call (JIT tracing and kernel
             compilation, or kernels from ~/.drjit) and --calls warm calls,
             each with its own seed and its own rel_l2.
   Penumbra  `penumbra grad scenes/geom.xml --param obj.vertex_positions
-            --mode forward --translate 1,0,0 -D res=128 --spp N [--sppp M]
-            --reps C`: forward mode with the interior term and the boundary
-            term of primary visibility (sppp edge samples per pixel,
-            default the spp, as Mitsuba's runtime spp), for each N of
-            --sweep, with the scene's `path` integrator (max_depth 2) and
+            --mode forward --translate 1,0,0 -D res=128 --spp N --sppp N
+            --sppi N --reps C`: forward mode with the interior term, the
+            boundary term of primary visibility (sppp edge samples per
+            pixel) and the boundary term of the visibility seen from the
+            first vertex (shadows; sppi samples per pixel), sppp = sppi =
+            the spp as Mitsuba's defaults set them (--sppp / --sppi M fix
+            them instead), for each N of --sweep, with the scene's `path`
+            integrator (max_depth 2) and
             with `direct_projective` (the scene with its integrator
             replaced, written to out/bench_geom/; Mitsuba's estimator: one
             emitter and one BSDF sample). rel_l2 of the first call's image.
@@ -41,9 +45,8 @@ rel_l2 is at most Mitsuba's; the ratios Mitsuba / Penumbra are taken there
 (target of the issue: ≥ 10× faster and ≤ 1/10 of the peak memory, whole
 processes). If no swept spp reaches Mitsuba's error, the table says so and
 gives the ratios at Penumbra's lowest error instead, marked as not at equal
-error. Until Penumbra has the shadow boundary term, its rel_l2 plateaus
-near 0.27 (the missing term's bias), so only the sppi = 0 comparison can
-be at equal error.
+error. Mitsuba's sppi = 0 configuration lacks the shadow term that
+Penumbra's runs have: its rows are equal error, not equal terms.
 
 Writes docs/bench_geom.md (--md; date, machine, versions, the command, the
 tables) and out/bench_geom/results.json (every process's measurements).
@@ -55,8 +58,8 @@ Set-up (once per machine), then run from anywhere:
   scripts/mitsuba/setup-mitsuba.sh          # venv at ~/.cache/penumbra-mitsuba/venv
   export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1   # the default
   export CARGO_TARGET_DIR=...                # optional; where `penumbra` is built
-  python3 scripts/bench_geom_boundary.py [--spp 64] [--sweep 8,16,32,64]
-      [--sppp M] [--reps 3] [--calls 1] [--mitsuba-reps 1] [--mitsuba-calls C]
+  python3 scripts/bench_geom_boundary.py [--spp 64] [--sweep 8,16,32,64,128]
+      [--sppp M] [--sppi M] [--reps 3] [--calls 1] [--mitsuba-reps 1] [--mitsuba-calls C]
       [--mitsuba-python PY]
       [--mitsuba direct_projective,direct_projective_sppi0]
       [--penumbra path,direct_projective] [--no-build] [--md docs/bench_geom.md]
@@ -64,11 +67,11 @@ Set-up (once per machine), then run from anywhere:
 --mitsuba-python (or $PENUMBRA_MITSUBA_PYTHON) points at the venv's python
 when it is not at the default place; the script stops with a message
 saying how to install it if it is missing. With the defaults the run took
-15.5 minutes on 2 cores shared with other builds (load average 4–5), two
-thirds of it the one Mitsuba `direct_projective` process (kernel
-compilation, then minutes of kernel execution at 2.6 GB);
-`--mitsuba-calls 0` saves its warm call (about 5 of those minutes),
-`--mitsuba direct_projective_sppi0` skips it. `--from-json
+19.4 minutes on 2 cores shared with other builds (load average 0.8 at the
+start, 19 at the end), two thirds of it the two Mitsuba processes (kernel
+compilation, then minutes of kernel execution; `direct_projective` at
+2.6 GB); `--mitsuba-calls 0` saves their warm calls (3–5 minutes each),
+`--mitsuba direct_projective_sppi0` skips the full one. `--from-json
 out/bench_geom/results.json` re-makes the tables of a finished run
 without running anything.
 """
@@ -146,6 +149,8 @@ def build_penumbra(a):
     h = subprocess.run([EXE, 'grad', '--help'], capture_output=True, text=True).stdout
     if '--translate' not in h:
         die(f'{EXE} grad has no --translate (rebuild: the option is needed for the +x tangent)')
+    if '--sppi' not in h:
+        die(f'{EXE} grad has no --sppi (rebuild: the shadow boundary term is needed)')
 
 
 def penumbra_scene(integrator):
@@ -251,13 +256,14 @@ def run_penumbra(a, scenes, integ, spp, rep):
     cmd = [EXE, 'grad', scenes[integ], '-q', '-D', 'res=128', '--param', 'obj.vertex_positions',
            '--mode', 'forward', '--translate', '1,0,0', '--spp', str(spp), '--seed', str(seed),
            '-o', d]
-    if a.sppp is not None:
-        cmd += ['--sppp', str(a.sppp)]
+    sppp = a.sppp if a.sppp is not None else spp
+    sppi = a.sppi if a.sppi is not None else spp
+    cmd += ['--sppp', str(sppp), '--sppi', str(sppi)]
     if a.calls > 0:
         cmd += ['--reps', str(a.calls)]
     rc, out, err, wall, rss = run_measured(cmd, timeout=a.timeout)
-    r = dict(side='penumbra', config=integ, spp=spp,
-             sppp=a.sppp if a.sppp is not None else spp, rep=rep, seed=seed, rc=rc,
+    r = dict(side='penumbra', config=integ, spp=spp, sppp=sppp, sppi=sppi, rep=rep, seed=seed,
+             rc=rc,
              wall_s=wall, peak_rss_mb=rss, image=rel(os.path.join(d, 'dimage.exr')),
              warnings=sorted({l.strip()[:600] for l in err.splitlines()
                               if l.lstrip().startswith('warning')}))
@@ -331,6 +337,7 @@ def summarize(runs):
         ok = [r for r in rs if 'error' not in r]
         errs = [e for r in ok for e in r.get('rel_l2', [])]
         row = dict(side=side, config=config, spp=spp, sppp=rs[0].get('sppp'),
+                   sppi=rs[0].get('sppi'),
                    n_proc=len(rs), n_failed=len(rs) - len(ok), n_images=len(errs),
                    rel_l2=statistics.mean(errs) if errs else None,
                    rel_l2_sd=statistics.stdev(errs) if len(errs) > 1 else None,
@@ -361,12 +368,13 @@ def label(row):
 
 
 def config_table(rows):
-    lines = ['| renderer, integrator | spp (sppp) | processes | rel_l2 vs FD (mean ± sd, n images) '
+    lines = ['| renderer, integrator | spp (sppp, sppi) | processes | rel_l2 vs FD (mean ± sd, n images) '
              '| process wall s (median, range) | first call s | warm call s | peak RSS MB '
              '| rel_l2 vs Mitsuba 384 spp: dp / dp sppi 0 |',
              '|---|---|---|---|---|---|---|---|---|']
     for r in rows:
-        spp = f'{r["spp"]}' if r['side'] == 'mitsuba' else f'{r["spp"]} ({r["sppp"]})'
+        spp = f'{r["spp"]}' if r['side'] == 'mitsuba' else \
+            f'{r["spp"]} ({r["sppp"]}, {"—" if r.get("sppi") is None else r["sppi"]})'
         err = (f'{fmt(r["rel_l2"])} ± {fmt(r["rel_l2_sd"])} ({r["n_images"]})'
                if r['rel_l2'] is not None else 'failed')
         rng = f' ({r["wall_range"][0]:.1f}–{r["wall_range"][1]:.1f})' if r['wall_range'] else ''
@@ -387,6 +395,11 @@ def times(x):
     return '—' if x is None else f'{x:.1f}×'
 
 
+def spp_label(p):
+    """A Penumbra row's budget: 'N spp (sppp, sppi)'."""
+    return f'{p["spp"]} spp ({p["sppp"]}, {"—" if p.get("sppi") is None else p["sppi"]})'
+
+
 def equal_error_table(rows):
     lines = ['| Mitsuba (rel_l2) | Penumbra at equal error | Penumbra rel_l2 (± sd) | whole process: '
              'time Mitsuba / Penumbra | warm call: Mitsuba / Penumbra | peak RSS: Penumbra / '
@@ -399,16 +412,16 @@ def equal_error_table(rows):
             cand = sorted([p for p in pns if p['config'] == integ], key=lambda p: p['spp'])
             match = [p for p in cand if p['rel_l2'] <= m['rel_l2']]
             if match:
-                picks = [(match[0], f'`{integ}` {match[0]["spp"]} spp', True)]
+                picks = [(match[0], f'`{integ}` {spp_label(match[0])}', True)]
                 # within the images' scatter of Mitsuba's error: also the
                 # first swept spp that is below it by more than its sd
                 clear = [p for p in match if p['rel_l2'] + (p['rel_l2_sd'] or 0) <= m['rel_l2']]
                 if clear and clear[0] is not match[0]:
-                    picks.append((clear[0], f'`{integ}` {clear[0]["spp"]} spp (below by more '
+                    picks.append((clear[0], f'`{integ}` {spp_label(clear[0])} (below by more '
                                             f'than its sd)', True))
             else:
                 p = min(cand, key=lambda p: p['rel_l2'])
-                picks = [(p, f'**not reached**; lowest error: `{integ}` {p["spp"]} spp '
+                picks = [(p, f'**not reached**; lowest error: `{integ}` {spp_label(p)} '
                              f'(ratios NOT at equal error)', False)]
             for p, where, matched in picks:
                 t = ratio(m['wall_s'], p['wall_s'])
@@ -458,10 +471,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--spp', type=int, default=64, help="Mitsuba's samples per pixel (default 64)")
-    ap.add_argument('--sweep', default='8,16,32,64',
-                    help="Penumbra's samples per pixel, comma-separated (default 8,16,32,64)")
+    ap.add_argument('--sweep', default='8,16,32,64,128',
+                    help="Penumbra's samples per pixel, comma-separated (default 8,16,32,64,128)")
     ap.add_argument('--sppp', type=int, default=None,
                     help="Penumbra's edge samples per pixel (default: each run's spp)")
+    ap.add_argument('--sppi', type=int, default=None,
+                    help="Penumbra's samples per pixel of the shadow boundary term "
+                         "(default: each run's spp)")
     ap.add_argument('--reps', type=int, default=3,
                     help='processes per Penumbra configuration (default 3)')
     ap.add_argument('--calls', type=int, default=1,
@@ -495,8 +511,9 @@ def main():
     a.mitsuba_reps = a.reps if a.mitsuba_reps is None else a.mitsuba_reps
     a.mitsuba_calls = a.calls if a.mitsuba_calls is None else a.mitsuba_calls
     if (min(sweep + [a.spp, a.reps]) < 1 or min(a.calls, a.mitsuba_calls, a.mitsuba_reps) < 0
-            or (a.sppp is not None and a.sppp < 0)):
-        die('--spp, --sweep and --reps must be >= 1, --calls, --mitsuba-* and --sppp >= 0')
+            or (a.sppp is not None and a.sppp < 0) or (a.sppi is not None and a.sppi < 0)):
+        die('--spp, --sweep and --reps must be >= 1, --calls, --mitsuba-*, --sppp and '
+            '--sppi >= 0')
     if not os.path.isfile(FD_REF):
         die(f'missing {rel(FD_REF)} (bundled with the repository)')
 
@@ -529,6 +546,7 @@ def main():
 def run_all(a, sweep, mi_cfgs, pn_cfgs, env, versions):
     """Every process of the benchmark; returns (meta, runs)."""
     build_penumbra(a)
+    rev = git_rev()  # the sources of the binary just built, not of the tree at the end
     os.makedirs(os.path.join(OUT, 'mi'), exist_ok=True)
     os.makedirs(os.path.join(OUT, 'pn'), exist_ok=True)
     scenes = {i: penumbra_scene(i) for i in pn_cfgs}
@@ -569,11 +587,18 @@ def run_all(a, sweep, mi_cfgs, pn_cfgs, env, versions):
                   + (f', rel_l2 {", ".join(f"{x:.3f}" for x in e)}' if e else ''), flush=True)
     meta = dict(date=started.isoformat(timespec='minutes'), command=cmdline, versions=versions,
                 machine=machine_note(), load_start=load_start[0], load_end=os.getloadavg()[0],
-                drjit_cache_files_at_start=cache_start, penumbra=git_rev(),
-                total_s=time.perf_counter() - t_run, spp=a.spp, sppp=a.sppp, calls=a.calls,
+                drjit_cache_files_at_start=cache_start, penumbra=rev,
+                total_s=time.perf_counter() - t_run, spp=a.spp, sppp=a.sppp, sppi=a.sppi,
+                calls=a.calls,
                 mitsuba_calls=a.mitsuba_calls, mitsuba_configs=mi_cfgs,
                 penumbra_integrators=pn_cfgs)
     return meta, runs
+
+
+def pn_terms(m):
+    """The terms Penumbra's runs estimate, in words."""
+    b = [t for t, k in (('primary visibility', 'sppp'), ('shadows', 'sppi')) if m.get(k) != 0]
+    return 'the interior term' + (f' and the boundary terms of {" and of ".join(b)}' if b else '')
 
 
 def report(meta, rows):
@@ -606,9 +631,10 @@ def report(meta, rows):
         f'sppp and sppi; sppi = 0 stays 0), seeds 1000·rep + call, '
         f'{m["mitsuba_calls"]} warm call(s) after the first in each process',
         '- Penumbra: `penumbra grad SCENE -D res=128 --param obj.vertex_positions --mode '
-        'forward --translate 1,0,0 --spp N` '
-        + (f'--sppp {m["sppp"]}' if m['sppp'] is not None else '(sppp = N)')
-        + f' --reps {m["calls"]}; `path` = scenes/geom.xml (max_depth 2); `direct_projective` '
+        'forward --translate 1,0,0 --spp N '
+        + f'--sppp {"N" if m["sppp"] is None else m["sppp"]} '
+        + f'--sppi {"N" if m.get("sppi") is None else m["sppi"]}'
+        + f' --reps {m["calls"]}` ({pn_terms(m)}); `path` = scenes/geom.xml (max_depth 2); `direct_projective` '
           f'= the same scene with that integrator',
         f'- times: process wall = the whole process (start-up, load, the first call and '
         f'the warm ones: {m["mitsuba_calls"]} for Mitsuba, {m["calls"]} for Penumbra), from '
@@ -629,9 +655,10 @@ def report(meta, rows):
     warns = sorted({w for r in rows for w in r['warnings']})
     for w in warns:
         notes.append(f'- Penumbra warned: "{w}"')
-    notes.append('- Until Penumbra has the boundary term of shadow edges, its rel_l2 '
-                 'plateaus near 0.27 whatever the spp (the bias of the missing term); '
-                 'Mitsuba\'s `direct_projective` with sppi = 0 misses the same term.')
+    if 'direct_projective_sppi0' in m['mitsuba_configs'] and m.get('sppi') != 0:
+        notes.append('- Mitsuba\'s `direct_projective` with sppi = 0 leaves out the boundary '
+                     'term of shadows, which Penumbra\'s runs include: its rows compare equal '
+                     'errors, not the same terms.')
     return body, '\n'.join(head + body + notes) + '\n'
 
 
