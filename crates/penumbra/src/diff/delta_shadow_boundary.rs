@@ -35,8 +35,7 @@
 //! through `⟨x(θ), n⟩` on a small tape, as the shadow term does.
 
 use super::shadow_boundary::{end_points, CandidateEdges};
-use super::splat::{FilmSplatter, CHUNK};
-use crate::ad::reverse::{backward, clear_tape};
+use super::splat::{add_splat_gradients, add_splats, BoundarySamples, FilmSplatter};
 use crate::ad::{Dual, Real, Var};
 use crate::emitter::DeltaOrigin;
 use crate::error::Result;
@@ -45,11 +44,9 @@ use crate::geometry::{DiffRay, Hit, Ray};
 use crate::integrator::{RenderOptions, Rendered};
 use crate::math::{V2, V3};
 use crate::params::ParamView;
+use crate::sampler::SampleStream;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
-
-/// Sample-stream keys of these samples (apart from the other terms').
-const STREAM_KEY: u64 = 0xde17_0000_0000_0000;
 
 /// Whether this pass estimates the term: a pinhole or orthographic camera,
 /// a point, spot or directional emitter, a lit first vertex and a budget
@@ -150,34 +147,39 @@ impl<'a> Context<'a> {
         ))
     }
 
-    fn chunk<S>(
-        &self,
-        c: usize,
-        count: u32,
-        emit: impl Fn(&Sample) -> Option<S>,
-    ) -> (Vec<S>, usize) {
-        let mut out = Vec::new();
-        let mut non_finite = 0;
-        for k in 0..count {
-            let mut rng =
-                self.film
-                    .sensor
-                    .sampler
-                    .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
-            let u = (k as f32 + rng.next_1d()) / count as f32;
-            let Some(sample) = self.sample(u.min(1.0 - f32::EPSILON), &mut rng) else {
-                continue;
-            };
-            if !sample.value.is_finite() {
-                non_finite += 1;
-            } else if let Some(s) = emit(&sample) {
-                out.push(s);
-            }
-        }
-        (out, non_finite)
+    /// `⟨x(θ), n⟩` of sample `s` in `R`: its derivative is the normal
+    /// velocity of the film curve.
+    fn normal_position<R: Real>(&self, store: &ParamView, s: &Sample) -> Option<R> {
+        let scene = self.scene;
+        let mesh = scene.shapes[s.shape as usize].as_mesh()?;
+        let (p0, p1) = end_points::<R>(mesh, store, s.edge);
+        let m = p0 + (p1 - p0) * R::cst(s.t);
+        let origin = scene.emitters[s.light as usize].delta_origin::<R>(store)?;
+        let f = self.shadow_on_film::<R>(store, m, origin, &s.hit)?;
+        Some(f.x * s.n.x + f.y * s.n.y)
+    }
+}
+
+impl BoundarySamples for Context<'_> {
+    type Sample = Sample;
+    const TERM: &'static str = "delta-light shadow boundary term";
+    /// Far from the keys of film pixels and of the other terms' samples.
+    const STREAM_KEY: u64 = 0xde17_0000_0000_0000;
+
+    fn film(&self) -> &FilmSplatter<'_> {
+        &self.film
+    }
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+    fn position(s: &Sample) -> Vec2 {
+        s.x
+    }
+    fn is_finite(s: &Sample) -> bool {
+        s.value.is_finite()
     }
 
-    fn sample(&self, u: f32, rng: &mut crate::sampler::SampleStream) -> Option<Sample> {
+    fn sample(&self, u: f32, rng: &mut SampleStream) -> Option<Sample> {
         let scene = self.scene;
         let primal = scene.params.primal();
         let (shape, edge, t, len) = self.edges.sample(u);
@@ -262,18 +264,6 @@ impl<'a> Context<'a> {
             value: jump * weight,
         })
     }
-
-    /// `⟨x(θ), n⟩` of sample `s` in `R`: its derivative is the normal
-    /// velocity of the film curve.
-    fn normal_position<R: Real>(&self, store: &ParamView, s: &Sample) -> Option<R> {
-        let scene = self.scene;
-        let mesh = scene.shapes[s.shape as usize].as_mesh()?;
-        let (p0, p1) = end_points::<R>(mesh, store, s.edge);
-        let m = p0 + (p1 - p0) * R::cst(s.t);
-        let origin = scene.emitters[s.light as usize].delta_origin::<R>(store)?;
-        let f = self.shadow_on_film::<R>(store, m, origin, &s.hit)?;
-        Some(f.x * s.n.x + f.y * s.n.y)
-    }
 }
 
 /// Adds the term along the tangents of `store` to the derivative image.
@@ -286,30 +276,10 @@ pub(crate) fn add_delta_shadow_boundary(
     let Some(ctx) = Context::new(scene, opts)? else {
         return Ok(());
     };
-    let mut acc = vec![0.0f64; image.data.len()];
-    image.non_finite_samples += ctx.film.run(
-        opts,
-        "delta-light shadow boundary term",
-        |c, count| {
-            ctx.chunk(c, count, |s| {
-                let v = ctx.normal_position::<Dual>(store, s)?.d;
-                (v != 0.0 && v.is_finite()).then(|| (s.x, s.value * v))
-            })
-        },
-        |batch| {
-            for (x, v) in batch.iter().flatten() {
-                ctx.film.footprint(*x, |p, w| {
-                    for c in 0..3 {
-                        acc[3 * p + c] += w * v[c] as f64;
-                    }
-                });
-            }
-        },
-    )?;
-    for (d, a) in image.data.iter_mut().zip(&acc) {
-        *d += *a as f32;
-    }
-    Ok(())
+    add_splats(&ctx, opts, image, |s| {
+        let v = ctx.normal_position::<Dual>(store, s)?.d;
+        (v != 0.0 && v.is_finite()).then(|| s.value * v)
+    })
 }
 
 /// Adds the term of the gradient of a loss with adjoint image `d_image` to
@@ -324,32 +294,11 @@ pub(crate) fn add_delta_shadow_boundary_gradients(
     let Some(ctx) = Context::new(scene, opts)? else {
         return Ok(0);
     };
-    ctx.film.run(
-        opts,
-        "delta-light shadow boundary term",
-        |c, count| {
-            ctx.chunk(c, count, |s| {
-                let a = ctx.film.adjoint(s.x, d_image);
-                let w: f64 = (0..3).map(|c| a[c] * s.value[c] as f64).sum();
-                if w == 0.0 {
-                    return None;
-                }
-                clear_tape();
-                let v = ctx.normal_position::<Var>(store, s);
-                let mut g = Vec::new();
-                if let Some(v) = v {
-                    backward(&[(v, w as f32)], |id, i, x| {
-                        g.push((id.0, i as u32, x as f64))
-                    });
-                }
-                clear_tape();
-                g.iter().all(|g| g.2.is_finite()).then_some(g)
-            })
-        },
-        |batch| {
-            for (id, i, g) in batch.into_iter().flatten().flatten() {
-                sums[id as usize][i as usize] += g;
-            }
-        },
-    )
+    add_splat_gradients(&ctx, opts, d_image, sums, |s, a| {
+        let w: f64 = (0..3).map(|c| a[c] * s.value[c] as f64).sum();
+        if w == 0.0 {
+            return None;
+        }
+        Some(vec![(ctx.normal_position::<Var>(store, s)?, w as f32)])
+    })
 }

@@ -121,7 +121,7 @@
 //! itself from it (the terminator of a coarse smooth mesh, seen directly)
 //! is not sampled.
 
-use super::splat::{FilmSplatter, Region, CHUNK};
+use super::splat::{FilmSplatter, Region};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Dual, Real, Var};
 use crate::error::Result;
@@ -797,76 +797,67 @@ impl<'a, M: Sync> Context<'a, M> {
         let scene = self.scene;
         let mut out = Vec::new();
         let mut non_finite = 0;
-        for k in 0..count {
-            let mut rng =
-                self.film
-                    .sensor
-                    .sampler
-                    .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
-            // jittered strata of the total length within the chunk: the
-            // chunk's samples are summed with equal weights, so the sum is
-            // unbiased, and the opposite contributions of the two sides of
-            // a moving shape cancel out much better than with independent
-            // positions
-            let u = (k as f32 + rng.next_1d()) / count as f32;
-            let (i, _, u) = self.dist.sample_reuse(u.min(1.0 - f32::EPSILON));
-            let seg = &self.segs[i];
-            let s = seg.s0 + u * (seg.s1 - seg.s0);
-            // the point, its normal, the ratio of the true density to the
-            // sampled one, and the world point seen there (for an edge,
-            // the line it lies on)
-            let (x, n, ratio, point) = match &seg.outline {
-                None => (seg.a + (seg.b - seg.a) * s, seg.n, 1.0, None),
-                Some(outline) => {
-                    let Some((x, n, ratio, p)) = self.outline_point(seg, outline, s) else {
-                        continue;
-                    };
-                    (x, n, ratio, Some(p))
+        // jittered strata of the total length
+        self.film
+            .jittered(self.seed, STREAM_KEY, c, count, |u, rng| {
+                let (i, _, u) = self.dist.sample_reuse(u);
+                let seg = &self.segs[i];
+                let s = seg.s0 + u * (seg.s1 - seg.s0);
+                // the point, its normal, the ratio of the true density to the
+                // sampled one, and the world point seen there (for an edge,
+                // the line it lies on)
+                let (x, n, ratio, point) = match &seg.outline {
+                    None => (seg.a + (seg.b - seg.a) * s, seg.n, 1.0, None),
+                    Some(outline) => {
+                        let Some((x, n, ratio, p)) = self.outline_point(seg, outline, s) else {
+                            return;
+                        };
+                        (x, n, ratio, Some(p))
+                    }
+                };
+                // the edge must be what the camera sees at x
+                let ray = self
+                    .film
+                    .camera_sample(x)
+                    .ray::<f32>(&scene.params.primal())
+                    .val();
+                let t_edge = match point {
+                    None => distance_along(ray.o, ray.d, seg.p0, seg.p1),
+                    Some(p) => Some((p - ray.o).dot(ray.d) / ray.d.dot(ray.d)),
+                };
+                if let (Some(hit), Some(t_edge)) = (scene.intersect(&ray), t_edge) {
+                    if hit.t < t_edge * (1.0 - 1e-3) {
+                        return;
+                    }
                 }
-            };
-            // the edge must be what the camera sees at x
-            let ray = self
-                .film
-                .camera_sample(x)
-                .ray::<f32>(&scene.params.primal())
-                .val();
-            let t_edge = match point {
-                None => distance_along(ray.o, ray.d, seg.p0, seg.p1),
-                Some(p) => Some((p - ray.o).dot(ray.d) / ray.d.dot(ray.d)),
-            };
-            if let (Some(hit), Some(t_edge)) = (scene.intersect(&ray), t_edge) {
-                if hit.t < t_edge * (1.0 - 1e-3) {
-                    continue;
+                let radiance = |side: f32| {
+                    let cs = self.film.camera_sample(self.beyond_horizon(
+                        x,
+                        n * side,
+                        seg.smooth.then_some(seg.shape),
+                    ));
+                    let mut r = rng.clone();
+                    scene
+                        .integrator
+                        .radiance::<f32>(scene, &scene.params.primal(), &cs, &mut r)
+                        .map_or(Vec3::ZERO, |l| l.val())
+                };
+                // the jump from the side n points to, to the side it points
+                // away from (module documentation)
+                let jump = radiance(-1.0) - radiance(1.0);
+                let value = jump * (self.total * ratio);
+                if !value.is_finite() {
+                    non_finite += 1;
+                } else if value != Vec3::ZERO {
+                    out.push(Splat {
+                        x,
+                        seg: i as u32,
+                        s,
+                        n,
+                        value: value.to_array(),
+                    });
                 }
-            }
-            let radiance = |side: f32| {
-                let cs = self.film.camera_sample(self.beyond_horizon(
-                    x,
-                    n * side,
-                    seg.smooth.then_some(seg.shape),
-                ));
-                let mut r = rng.clone();
-                scene
-                    .integrator
-                    .radiance::<f32>(scene, &scene.params.primal(), &cs, &mut r)
-                    .map_or(Vec3::ZERO, |l| l.val())
-            };
-            // the jump from the side n points to, to the side it points
-            // away from (module documentation)
-            let jump = radiance(-1.0) - radiance(1.0);
-            let value = jump * (self.total * ratio);
-            if !value.is_finite() {
-                non_finite += 1;
-            } else if value != Vec3::ZERO {
-                out.push(Splat {
-                    x,
-                    seg: i as u32,
-                    s,
-                    n,
-                    value: value.to_array(),
-                });
-            }
-        }
+            });
         (out, non_finite)
     }
 }

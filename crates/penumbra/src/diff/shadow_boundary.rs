@@ -67,8 +67,7 @@
 //! what lies behind it, thin-lens cameras. Callers warn about them
 //! ([`super::warn_missing_boundary_terms`]).
 
-use super::splat::{FilmSplatter, CHUNK};
-use crate::ad::reverse::{backward, clear_tape};
+use super::splat::{add_splat_gradients, add_splats, BoundarySamples, FilmSplatter};
 use crate::ad::{Dual, Real, Var};
 use crate::bsdf::BsdfContextT;
 use crate::emitter::EmitterT;
@@ -79,13 +78,11 @@ use crate::integrator::{Integrator, RenderOptions, Rendered};
 use crate::math::warp::square_to_uniform_sphere;
 use crate::math::{DiscreteDistribution, V3};
 use crate::params::ParamView;
+use crate::sampler::SampleStream;
 use crate::scene::Scene;
 use crate::sensor::projection::Projector;
 use glam::{Vec2, Vec3};
 
-/// Sample-stream keys of these samples: far from those of film pixels and
-/// of the primary term's edge samples.
-const STREAM_KEY: u64 = 0x5d0e_0000_0000_0000;
 /// Angle (radians) between the two sides traced and the edge.
 const SIDE_ANGLE: f32 = 1e-4;
 
@@ -224,41 +221,93 @@ impl<'a> Context<'a> {
         }))
     }
 
-    /// The samples of chunk `c` (`count` of them) that reach the film,
-    /// each passed to `emit`, which returns what the pass keeps of it; and
-    /// the number of non-finite ones.
-    fn chunk<S>(
+    /// The density by which the strategies that can produce what `side`
+    /// (the ray `ray` from x) reaches produce direction `d` at m, by the
+    /// balance heuristic, or `None` if the strategy `picked` (an emitter,
+    /// `None` for the uniform one) cannot have produced it.
+    fn density(
         &self,
-        c: usize,
-        count: u32,
-        emit: impl Fn(&Sample) -> Option<S>,
-    ) -> (Vec<S>, usize) {
-        let mut out = Vec::new();
-        let mut non_finite = 0;
-        for k in 0..count {
-            let mut rng =
-                self.film
-                    .sensor
-                    .sampler
-                    .stream(self.seed, STREAM_KEY | c as u64, k, CHUNK);
-            // jittered strata of the total length within the chunk (see
-            // the primary term)
-            let u = (k as f32 + rng.next_1d()) / count as f32;
-            let Some(sample) = self.sample(u.min(1.0 - f32::EPSILON), &mut rng) else {
-                continue;
-            };
-            if !sample.value.iter().all(|v| v.is_finite()) {
-                non_finite += 1;
-            } else if let Some(s) = emit(&sample) {
-                out.push(s);
-            }
-        }
-        (out, non_finite)
+        m: Vec3,
+        d: Vec3,
+        picked: Option<u32>,
+        side: Option<&Hit>,
+        ray: &Ray,
+    ) -> Option<f32> {
+        let scene = self.scene;
+        let (seen, emitter_pdf) = match side {
+            Some(h) => match scene.shape_emitter(h.shape) {
+                Some(em) => {
+                    let p = ray.at(h.t);
+                    let si = scene.surface_interaction::<f32>(
+                        &scene.params.primal(),
+                        &DiffRay::cst(ray),
+                        h,
+                    );
+                    (
+                        Some(em),
+                        scene.pdf_emitter_direction(em, m, d, p, si.n.val()),
+                    )
+                }
+                None => (None, 0.0),
+            },
+            None => match scene.environment {
+                Some(env) => (Some(env), scene.pdf_emitter_direction(env, m, d, d, d)),
+                None => (None, 0.0),
+            },
+        };
+        let p = self.uniform / (4.0 * std::f32::consts::PI) + (1.0 - self.uniform) * emitter_pdf;
+        let produced = picked.is_none() || picked == seen;
+        (produced && p > 0.0).then_some(p)
+    }
+
+    /// `V⁻`, `V⁺` of `s` in `R` (module documentation): normal components
+    /// of the relative velocities, whose values are (near) zero and whose
+    /// derivatives are the velocities.
+    fn velocities<R: Real>(&self, store: &ParamView, s: &Sample) -> [R; 2] {
+        let scene = self.scene;
+        let cs = self.film.camera_sample(s.x);
+        let ray = cs.ray::<R>(store);
+        let x = scene.surface_interaction::<R>(store, &ray, &s.hit).p;
+        let mesh = scene.shapes[s.shape as usize]
+            .as_mesh()
+            .expect("candidate edges belong to meshes");
+        let (p0, p1) = end_points::<R>(mesh, store, s.edge);
+        let m = p0 + (p1 - p0) * R::cst(s.t);
+        let n = V3::cst(s.n);
+        let normal = |p: V3<R>| {
+            let to = p - x;
+            to.dot(n) / to.val().length()
+        };
+        let v_edge = normal(m);
+        s.sides.map(|side| match side {
+            Some((hit, p)) => v_edge - normal(scene.point_at::<R>(store, &hit, p).p),
+            None => v_edge,
+        })
+    }
+}
+
+impl BoundarySamples for Context<'_> {
+    type Sample = Sample;
+    const TERM: &'static str = "shadow boundary term";
+    /// Far from the keys of film pixels and of the other terms' samples.
+    const STREAM_KEY: u64 = 0x5d0e_0000_0000_0000;
+
+    fn film(&self) -> &FilmSplatter<'_> {
+        &self.film
+    }
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+    fn position(s: &Sample) -> Vec2 {
+        s.x
+    }
+    fn is_finite(s: &Sample) -> bool {
+        s.value.iter().all(|v| v.is_finite())
     }
 
     /// One boundary segment (module documentation), if it reaches a first
     /// vertex the camera sees and its value is not zero.
-    fn sample(&self, u: f32, rng: &mut crate::sampler::SampleStream) -> Option<Sample> {
+    fn sample(&self, u: f32, rng: &mut SampleStream) -> Option<Sample> {
         let scene = self.scene;
         let primal = scene.params.primal();
         let (shape, edge, t, _) = self.edges.sample(u);
@@ -376,70 +425,6 @@ impl<'a> Context<'a> {
             value,
         })
     }
-
-    /// The density by which the strategies that can produce what `side`
-    /// (the ray `ray` from x) reaches produce direction `d` at m, by the
-    /// balance heuristic, or `None` if the strategy `picked` (an emitter,
-    /// `None` for the uniform one) cannot have produced it.
-    fn density(
-        &self,
-        m: Vec3,
-        d: Vec3,
-        picked: Option<u32>,
-        side: Option<&Hit>,
-        ray: &Ray,
-    ) -> Option<f32> {
-        let scene = self.scene;
-        let (seen, emitter_pdf) = match side {
-            Some(h) => match scene.shape_emitter(h.shape) {
-                Some(em) => {
-                    let p = ray.at(h.t);
-                    let si = scene.surface_interaction::<f32>(
-                        &scene.params.primal(),
-                        &DiffRay::cst(ray),
-                        h,
-                    );
-                    (
-                        Some(em),
-                        scene.pdf_emitter_direction(em, m, d, p, si.n.val()),
-                    )
-                }
-                None => (None, 0.0),
-            },
-            None => match scene.environment {
-                Some(env) => (Some(env), scene.pdf_emitter_direction(env, m, d, d, d)),
-                None => (None, 0.0),
-            },
-        };
-        let p = self.uniform / (4.0 * std::f32::consts::PI) + (1.0 - self.uniform) * emitter_pdf;
-        let produced = picked.is_none() || picked == seen;
-        (produced && p > 0.0).then_some(p)
-    }
-
-    /// `V⁻`, `V⁺` of `s` in `R` (module documentation): normal components
-    /// of the relative velocities, whose values are (near) zero and whose
-    /// derivatives are the velocities.
-    fn velocities<R: Real>(&self, store: &ParamView, s: &Sample) -> [R; 2] {
-        let scene = self.scene;
-        let cs = self.film.camera_sample(s.x);
-        let ray = cs.ray::<R>(store);
-        let x = scene.surface_interaction::<R>(store, &ray, &s.hit).p;
-        let mesh = scene.shapes[s.shape as usize]
-            .as_mesh()
-            .expect("candidate edges belong to meshes");
-        let (p0, p1) = end_points::<R>(mesh, store, s.edge);
-        let m = p0 + (p1 - p0) * R::cst(s.t);
-        let n = V3::cst(s.n);
-        let normal = |p: V3<R>| {
-            let to = p - x;
-            to.dot(n) / to.val().length()
-        };
-        let v_edge = normal(m);
-        s.sides.map(|side| match side {
-            Some((hit, p)) => v_edge - normal(scene.point_at::<R>(store, &hit, p).p),
-            None => v_edge,
-        })
-    }
 }
 
 /// The world end points of edge `edge` of `mesh`, in `R`.
@@ -478,39 +463,18 @@ pub(crate) fn add_shadow_boundary(
     let Some(ctx) = Context::new(scene, opts)? else {
         return Ok(());
     };
-    let mut acc = vec![0.0f64; image.data.len()];
-    image.non_finite_samples += ctx.film.run(
-        opts,
-        "shadow boundary term",
-        |c, count| {
-            ctx.chunk(c, count, |s| {
-                let [vm, vp] = ctx.velocities::<Dual>(store, s);
-                let v = s.value[0] * vm.d - s.value[1] * vp.d;
-                (v != Vec3::ZERO).then_some((s.x, v))
-            })
-        },
-        |batch| {
-            for (x, v) in batch.iter().flatten() {
-                ctx.film.footprint(*x, |p, w| {
-                    for c in 0..3 {
-                        acc[3 * p + c] += w * v[c] as f64;
-                    }
-                });
-            }
-        },
-    )?;
-    for (d, a) in image.data.iter_mut().zip(&acc) {
-        *d += *a as f32;
-    }
-    Ok(())
+    add_splats(&ctx, opts, image, |s| {
+        let [vm, vp] = ctx.velocities::<Dual>(store, s);
+        let v = s.value[0] * vm.d - s.value[1] * vp.d;
+        (v != Vec3::ZERO).then_some(v)
+    })
 }
 
 /// Adds the term of the gradient of a loss, given its adjoint image
 /// `d_image` (crop window × 3), to `sums` (per parameter, per element, for
 /// the parameters `store` records); returns the number of non-finite
 /// samples left out. Each sample's weight `Σ_p δI_p k_p(x)/(W_p N) ·
-/// value±` is backpropagated through its velocities, inside the parallel
-/// chunks; the chunks' contributions are added in chunk order.
+/// value±` is backpropagated through its velocities.
 pub(crate) fn add_shadow_boundary_gradients(
     scene: &Scene,
     store: &ParamView,
@@ -521,32 +485,13 @@ pub(crate) fn add_shadow_boundary_gradients(
     let Some(ctx) = Context::new(scene, opts)? else {
         return Ok(0);
     };
-    ctx.film.run(
-        opts,
-        "shadow boundary term",
-        |c, count| {
-            let (grads, non_finite) = ctx.chunk(c, count, |s| {
-                let a = ctx.film.adjoint(s.x, d_image);
-                let weight = |v: Vec3| (0..3).map(|c| a[c] * v[c] as f64).sum::<f64>();
-                let (wm, wp) = (weight(s.value[0]), weight(s.value[1]));
-                if wm == 0.0 && wp == 0.0 {
-                    return None;
-                }
-                clear_tape();
-                let [vm, vp] = ctx.velocities::<Var>(store, s);
-                let mut g = Vec::new();
-                backward(&[(vm, wm as f32), (vp, -wp as f32)], |id, i, v| {
-                    g.push((id.0, i as u32, v as f64))
-                });
-                clear_tape();
-                g.iter().all(|g| g.2.is_finite()).then_some(g)
-            });
-            (grads, non_finite)
-        },
-        |batch| {
-            for (id, i, g) in batch.into_iter().flatten().flatten() {
-                sums[id as usize][i as usize] += g;
-            }
-        },
-    )
+    add_splat_gradients(&ctx, opts, d_image, sums, |s, a| {
+        let weight = |v: Vec3| (0..3).map(|c| a[c] * v[c] as f64).sum::<f64>();
+        let (wm, wp) = (weight(s.value[0]), weight(s.value[1]));
+        if wm == 0.0 && wp == 0.0 {
+            return None;
+        }
+        let [vm, vp] = ctx.velocities::<Var>(store, s);
+        Some(vec![(vm, wm as f32), (vp, -wp as f32)])
+    })
 }

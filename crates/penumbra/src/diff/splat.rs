@@ -9,11 +9,14 @@
 //! `v` (already divided by its density) adds `k_p(x) v / (W_p · N)` to every
 //! pixel p the filter reaches, N being the number of samples.
 
+use crate::ad::reverse::{backward, clear_tape};
+use crate::ad::Var;
 use crate::error::{Error, Result};
 use crate::image::{ImageBlock, ReconstructionFilter};
-use crate::integrator::RenderOptions;
+use crate::integrator::{RenderOptions, Rendered};
+use crate::sampler::SampleStream;
 use crate::sensor::{CameraSample, Sensor};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 
@@ -165,6 +168,29 @@ impl<'a> FilmSplatter<'a> {
         Ok(non_finite)
     }
 
+    /// Calls `f(u, rng)` for each of the `count` samples of chunk `c` of
+    /// the stream `key` (a term's own) and `seed`: u in jittered strata of
+    /// [0, 1) within the chunk, rng the sample's own stream for the rest.
+    ///
+    /// Why strata: the chunk's samples are summed with equal weights, so
+    /// the sum stays unbiased, and the opposite contributions of the two
+    /// sides of a moving shape cancel out much better than with
+    /// independent positions.
+    pub fn jittered(
+        &self,
+        seed: u64,
+        key: u64,
+        c: usize,
+        count: u32,
+        mut f: impl FnMut(f32, &mut SampleStream),
+    ) {
+        for k in 0..count {
+            let mut rng = self.sensor.sampler.stream(seed, key | c as u64, k, CHUNK);
+            let u = (k as f32 + rng.next_1d()) / count as f32;
+            f(u.min(1.0 - f32::EPSILON), &mut rng);
+        }
+    }
+
     /// Calls `f(pixel, weight)` for every pixel p (index in the crop
     /// window) the filter reaches from film position `x`, with weight
     /// `k_p(x) / (W_p · N)`.
@@ -188,6 +214,123 @@ impl<'a> FilmSplatter<'a> {
         });
         a
     }
+}
+
+/// A boundary term whose samples are independent of the parameters and
+/// splat onto the film one by one (the shadow terms): it draws them, and
+/// [`add_splats`] and [`add_splat_gradients`] run the forward and the
+/// reverse mode from the same samples.
+pub(super) trait BoundarySamples: Sync {
+    type Sample;
+    /// Names the term in warnings.
+    const TERM: &'static str;
+    /// The term's sample streams (high bits, distinct from every other
+    /// term's).
+    const STREAM_KEY: u64;
+
+    fn film(&self) -> &FilmSplatter<'_>;
+    fn seed(&self) -> u64;
+    /// The sample drawn at `u` (jittered, see [`FilmSplatter::jittered`])
+    /// and `rng`, if it reaches the film with a non-zero value.
+    fn sample(&self, u: f32, rng: &mut SampleStream) -> Option<Self::Sample>;
+    /// Its film position (crop-window pixels).
+    fn position(s: &Self::Sample) -> Vec2;
+    fn is_finite(s: &Self::Sample) -> bool;
+
+    /// What `emit` keeps of the samples of chunk `c` (`count` samples),
+    /// and the number of non-finite ones.
+    fn chunk<S>(
+        &self,
+        c: usize,
+        count: u32,
+        emit: impl Fn(&Self::Sample) -> Option<S>,
+    ) -> (Vec<S>, usize) {
+        let mut out = Vec::new();
+        let mut non_finite = 0;
+        self.film()
+            .jittered(self.seed(), Self::STREAM_KEY, c, count, |u, rng| {
+                let Some(sample) = self.sample(u, rng) else {
+                    return;
+                };
+                if !Self::is_finite(&sample) {
+                    non_finite += 1;
+                } else if let Some(s) = emit(&sample) {
+                    out.push(s);
+                }
+            });
+        (out, non_finite)
+    }
+}
+
+/// Forward mode: adds `Σ k_p(x)/(W_p N) · value(sample)` to every pixel p
+/// of the derivative image, `value` being a sample's derivative along the
+/// tangents (`None` where it is zero).
+pub(super) fn add_splats<T: BoundarySamples>(
+    term: &T,
+    opts: &RenderOptions,
+    image: &mut Rendered,
+    value: impl Fn(&T::Sample) -> Option<Vec3> + Sync,
+) -> Result<()> {
+    let film = term.film();
+    let mut acc = vec![0.0f64; image.data.len()];
+    image.non_finite_samples += film.run(
+        opts,
+        T::TERM,
+        |c, count| term.chunk(c, count, |s| value(s).map(|v| (T::position(s), v))),
+        |batch| {
+            for (x, v) in batch.iter().flatten() {
+                film.footprint(*x, |p, w| {
+                    for c in 0..3 {
+                        acc[3 * p + c] += w * v[c] as f64;
+                    }
+                });
+            }
+        },
+    )?;
+    for (d, a) in image.data.iter_mut().zip(&acc) {
+        *d += *a as f32;
+    }
+    Ok(())
+}
+
+/// Reverse mode: adds the term of the gradient of a loss with adjoint image
+/// `d_image` (crop window × 3) to `sums` (per parameter, per element, for
+/// the parameters recorded on the tape); returns the number of non-finite
+/// samples left out. `outputs(sample, a)`, given the sample's adjoint
+/// `a = Σ_p δI_p k_p(x)/(W_p N)` per channel, records the sample's motion
+/// on a fresh tape and returns the outputs to backpropagate with their
+/// weights (`None` when they are all zero). Each sample's tape is small and
+/// lives inside its parallel chunk; the chunks' gradients are added in
+/// chunk order (the result does not depend on the thread count).
+pub(super) fn add_splat_gradients<T: BoundarySamples>(
+    term: &T,
+    opts: &RenderOptions,
+    d_image: &[f32],
+    sums: &mut [Vec<f64>],
+    outputs: impl Fn(&T::Sample, [f64; 3]) -> Option<Vec<(Var, f32)>> + Sync,
+) -> Result<usize> {
+    let film = term.film();
+    film.run(
+        opts,
+        T::TERM,
+        |c, count| {
+            term.chunk(c, count, |s| {
+                let a = film.adjoint(T::position(s), d_image);
+                clear_tape();
+                let mut g = Vec::new();
+                if let Some(outs) = outputs(s, a) {
+                    backward(&outs, |id, i, v| g.push((id.0, i as u32, v as f64)));
+                }
+                clear_tape();
+                (!g.is_empty() && g.iter().all(|g| g.2.is_finite())).then_some(g)
+            })
+        },
+        |batch| {
+            for (id, i, g) in batch.into_iter().flatten().flatten() {
+                sums[id as usize][i as usize] += g;
+            }
+        },
+    )
 }
 
 /// `∫_lo^hi k(u) du` of the 1D filter `k` (offsets in pixels), by
