@@ -8,8 +8,13 @@
 //! reports progress; Rust errors become Python exceptions, and a panic in
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
-use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use glam::Vec3;
+use numpy::{
+    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLike1, PyArrayLike2, PyArrayMethods,
+    PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use penumbra::diff::{gradient_seed as derive_gradient_seed, render_backward, render_forward};
+use penumbra::geometry::Ray;
 use penumbra::image::{self, Image};
 use penumbra::integrator::{render, Integrator, RenderOptions, Rendered};
 use penumbra::optim::pose::{normals_key, Pose, PoseLayout};
@@ -243,6 +248,40 @@ impl PyIntegrator {
 
 /// A loaded scene: geometry, materials, emitters, sensors, integrator and
 /// the parameter store.
+/// The rays of `ray_intersect` / `ray_test`, with the shapes checked.
+fn rays_of(
+    origins: &PyArrayLike2<'_, f32, AllowTypeChange>,
+    directions: &PyArrayLike2<'_, f32, AllowTypeChange>,
+    tmax: Option<&PyArrayLike1<'_, f32, AllowTypeChange>>,
+) -> PyResult<Vec<Ray>> {
+    let (o, d) = (origins.as_array(), directions.as_array());
+    if o.ncols() != 3 || o.shape() != d.shape() {
+        return Err(PyValueError::new_err(format!(
+            "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
+            o.shape(),
+            d.shape()
+        )));
+    }
+    let tmax = tmax.map(|t| t.as_array());
+    if let Some(t) = &tmax {
+        if t.len() != o.nrows() {
+            return Err(PyValueError::new_err(format!(
+                "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
+                o.nrows(),
+                t.shape()
+            )));
+        }
+    }
+    Ok((0..o.nrows())
+        .map(|i| Ray {
+            o: Vec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]),
+            d: Vec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]]),
+            tmin: 0.0,
+            tmax: tmax.as_ref().map_or(f32::INFINITY, |t| t[i]),
+        })
+        .collect())
+}
+
 #[pyclass(name = "Scene", module = "penumbra._core")]
 struct PyScene {
     inner: Scene,
@@ -314,6 +353,70 @@ impl PyScene {
 
 #[pymethods]
 impl PyScene {
+    /// The first surface each of N rays hits: `origins` and `directions`
+    /// are `(N, 3)` arrays (any float type; directions need not be unit
+    /// vectors: `t` is in their units), `tmax` an optional `(N,)` array of
+    /// maximum distances (default: infinite). Returns a dict of arrays, as
+    /// Mitsuba's `PreliminaryIntersection3f` names them: `t` `(N,)`
+    /// float32 (`inf` where the ray misses), `shape_index` and
+    /// `prim_index` `(N,)` int32 (−1 where it misses; shapes in scene
+    /// order, triangles in mesh order), `prim_uv` `(N, 2)` float32 (the
+    /// barycentric coordinates of vertices 1 and 2 of the triangle, or the
+    /// shape's own surface coordinates). Traced in parallel with the GIL
+    /// released, on the scene as of its last `update()`.
+    #[pyo3(signature = (origins, directions, tmax=None))]
+    fn ray_intersect<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
+        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
+        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let scene = &self.inner;
+        let hits = py.detach(|| scene.intersect_rays(&rays));
+        let n = hits.len();
+        let (mut t, mut shape, mut prim, mut uv) = (
+            vec![f32::INFINITY; n],
+            vec![-1i32; n],
+            vec![-1i32; n],
+            vec![0.0f32; 2 * n],
+        );
+        for (i, h) in hits.iter().enumerate() {
+            if let Some(h) = h {
+                t[i] = h.t;
+                shape[i] = h.shape as i32;
+                prim[i] = h.prim as i32;
+                uv[2 * i] = h.uv.x;
+                uv[2 * i + 1] = h.uv.y;
+            }
+        }
+        let out = PyDict::new(py);
+        out.set_item("t", PyArray1::from_vec(py, t))?;
+        out.set_item("shape_index", PyArray1::from_vec(py, shape))?;
+        out.set_item("prim_index", PyArray1::from_vec(py, prim))?;
+        out.set_item("prim_uv", array(py, uv, vec![n, 2])?)?;
+        Ok(out)
+    }
+
+    /// Whether each of N rays hits any surface before `tmax` (arguments as
+    /// in `ray_intersect`): an `(N,)` bool array.
+    #[pyo3(signature = (origins, directions, tmax=None))]
+    fn ray_test<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
+        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
+        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let scene = &self.inner;
+        Ok(PyArray1::from_vec(
+            py,
+            py.detach(|| scene.occluded_rays(&rays)),
+        ))
+    }
+
     /// Keys of all parameters, in scene order.
     fn param_keys(&self) -> Vec<String> {
         self.inner

@@ -20,13 +20,15 @@ estimate.
 Mitsuba's ``seed_grad``): the same samples would bias the gradient of a
 non-linear loss. Pass ``seed_grad=seed`` for the exact derivative of the
 image rendered with ``seed``.
-Geometry parameters (flagged discontinuous) get the interior term of
-their derivative and, in ``render_forward`` for meshes seen by a pinhole
-or orthographic camera, the boundary term of primary visibility (edges
-seen directly, estimated with edge samples of their own); the boundary
-terms of shadows (and, in ``render_backward``, of silhouettes) are not
-estimated yet, with a warning that names them. :class:`Pose` maps a latent
-translation and rotation onto vertex positions or a ``to_world``.
+Geometry and camera parameters (flagged discontinuous) get the interior
+term of their derivative and, in both modes, the boundary terms of
+primary visibility (edges and outlines seen by a pinhole or orthographic
+camera, ``sppp`` samples per pixel) and of shadows (edges seen from the
+first vertex, ``sppi``); what is not estimated (shadows cast by spheres
+and disks, edges seen after a bounce, thin lenses) is named by a warning.
+:class:`Pose` maps a latent translation and rotation onto vertex
+positions or a ``to_world``. ``Scene.ray_intersect`` and
+``Scene.ray_test`` trace numpy arrays of rays.
 """
 
 from __future__ import annotations

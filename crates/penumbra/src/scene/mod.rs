@@ -63,6 +63,10 @@ use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
 use std::path::Path;
 
+/// Rays traced by one parallel task of [`Scene::intersect_rays`] at the
+/// least: a task must outweigh its scheduling.
+const RAYS_PER_TASK: usize = 1024;
+
 /// What the scene knows about a shape besides its geometry.
 #[derive(Clone, Debug)]
 pub struct ShapeInfo {
@@ -122,6 +126,26 @@ impl Scene {
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.accel.occluded(ray)
+    }
+
+    /// The first hits of many rays, traced in parallel on rayon's threads
+    /// (the Python `Scene.ray_intersect` of numpy arrays of rays).
+    pub fn intersect_rays(&self, rays: &[Ray]) -> Vec<Option<Hit>> {
+        use rayon::prelude::*;
+        rays.par_iter()
+            .with_min_len(RAYS_PER_TASK)
+            .map(|r| self.intersect(r))
+            .collect()
+    }
+
+    /// Whether each of many rays hits anything, in parallel (the Python
+    /// `Scene.ray_test`).
+    pub fn occluded_rays(&self, rays: &[Ray]) -> Vec<bool> {
+        use rayon::prelude::*;
+        rays.par_iter()
+            .with_min_len(RAYS_PER_TASK)
+            .map(|r| self.occluded(r))
+            .collect()
     }
 
     /// Re-evaluates a hit in `R`, the point sliding along `ray` (see
