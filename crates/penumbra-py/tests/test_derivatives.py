@@ -183,6 +183,17 @@ def test_the_gradient_seed_is_decorrelated_by_default_and_can_be_set(scene):
     assert np.array_equal(grad(seed=5, seed_grad=123), direct)
 
 
+def test_spp_grad_sets_the_replay_samples(scene):
+    key = "ball.bsdf.reflectance.value"
+    w = np.ones((20, 20, 3), np.float32)
+    seed_grad = pn.gradient_seed(0)
+    two = scene.render_backward(w, keys=[key], spp=2, seed=seed_grad)[key]
+    assert np.array_equal(pn.render_backward(scene, w, spp=1, spp_grad=2, keys=key)[key], two)
+    assert np.array_equal(pn.render_backward(scene, w, spp=2, keys=key)[key], two)
+    with pytest.raises(ValueError, match="spp must be a positive integer"):
+        pn.render_backward(scene, w, spp_grad=-1, keys=key)
+
+
 def test_adjoint_shapes_must_match_the_film():
     d = small_dict(res=6, spp=1)
     d["sensor"]["film"] = {"type": "hdrfilm", "width": 6, "height": 4}

@@ -159,6 +159,20 @@ def test_threads_do_not_change_the_image(cbox):
     assert np.array_equal(pn.render(cbox, spp=2, threads=1), pn.render(cbox, spp=2))
 
 
-def test_set_variant_is_accepted():
-    pn.set_variant("llvm_ad_rgb")
-    assert isinstance(pn.variant(), str)
+def test_variants_are_named_as_mitsuba_and_others_are_refused():
+    assert pn.variants() == ["scalar_rgb", "llvm_ad_rgb"]
+    try:
+        pn.set_variant("scalar_rgb")
+        assert pn.variant() == "scalar_rgb"
+        # the first available one, as in Mitsuba
+        pn.set_variant("cuda_ad_rgb", "llvm_ad_rgb")
+        assert pn.variant() == "llvm_ad_rgb"
+        for other in ["scalar_spectral", "llvm_ad_spectral_polarized", "llvm_ad_mono", "cuda_ad_rgb"]:
+            with pytest.raises(ValueError, match=f"'{other}' is not available: Penumbra has "
+                               "scalar_rgb, llvm_ad_rgb"):
+                pn.set_variant(other)
+        assert pn.variant() == "llvm_ad_rgb", "a refused request changes nothing"
+        with pytest.raises(TypeError, match="needs a variant name"):
+            pn.set_variant()
+    finally:
+        pn.set_variant("llvm_ad_rgb")

@@ -70,18 +70,51 @@ __all__ = [
     "set_variant",
     "traverse",
     "variant",
+    "variants",
     "write_image",
 ]
 
 
-def set_variant(*variants):
-    """Accepted for compatibility with Mitsuba scripts; Penumbra has one
-    variant (CPU, RGB, differentiable), so this does nothing."""
-    return None
+# Penumbra's one renderer (RGB, on the CPU, differentiable) under the names
+# of the Mitsuba variants it stands for.
+_VARIANTS = ("scalar_rgb", "llvm_ad_rgb")
+_variant = "llvm_ad_rgb"
 
 
-def variant():
-    return "scalar_rgb_ad"
+def variants() -> list:
+    """The variants Penumbra has, named as Mitsuba's: ``scalar_rgb`` and
+    ``llvm_ad_rgb``, one renderer (RGB, CPU, differentiable) under both
+    names."""
+    return list(_VARIANTS)
+
+
+def set_variant(*names):
+    """Selects the first of ``names`` that Penumbra has, as Mitsuba's
+    ``set_variant`` does (``set_variant('cuda_ad_rgb', 'llvm_ad_rgb')``
+    selects ``llvm_ad_rgb``). If it has none of them (a spectral,
+    polarized, monochrome or CUDA variant), a ValueError names the variants
+    it has: a script written for another variant would not compute what it
+    expects."""
+    global _variant
+    if not names:
+        raise TypeError(f"set_variant() needs a variant name; Penumbra has {', '.join(_VARIANTS)}")
+    for name in names:
+        if not isinstance(name, str):
+            raise TypeError(f"variant names are strings, got {type(name).__name__}")
+    for name in names:
+        if name in _VARIANTS:
+            _variant = name
+            return None
+    asked = ", ".join(repr(n) for n in names)
+    raise ValueError(
+        f"variant {asked} is not available: Penumbra has {', '.join(_VARIANTS)} (RGB on the "
+        f"CPU, differentiable; no spectral, polarized, monochrome or CUDA variant)"
+    )
+
+
+def variant() -> str:
+    """The selected variant (``llvm_ad_rgb`` until :func:`set_variant`)."""
+    return _variant
 
 
 def _define_value(v):
@@ -354,6 +387,7 @@ def render_backward(
     force=False,
     sppp=None,
     sppi=None,
+    spp_grad=None,
 ) -> dict:
     """Reverse-mode derivative: given ``d_image`` =
     ∂loss/∂image of the image rendered with ``seed`` (``(H, W, 3)``, or
@@ -367,9 +401,11 @@ def render_backward(
     The paths are replayed with ``seed_grad``, by default
     :func:`gradient_seed` ``(seed)``: samples independent of the image's,
     so that the gradient of a non-linear loss is unbiased. ``seed_grad=seed``
-    gives the exact derivative of the rendered estimate instead.
+    gives the exact derivative of the rendered estimate instead. As in
+    Mitsuba's ``render``, ``spp_grad`` sets the replay's samples per pixel
+    (default ``spp``, that of the image).
 
-    ``spp``, ``sppp`` and ``sppi`` override the integrator's ``sppc``,
+    ``spp`` (or ``spp_grad``), ``sppp`` and ``sppi`` override the integrator's ``sppc``,
     ``sppp`` and ``sppi`` as in :func:`render_forward`; like forward mode,
     reverse mode adds the boundary terms of primary visibility and of
     shadows when a key moves geometry or the camera, from the same boundary
@@ -387,7 +423,15 @@ def render_backward(
         keys=keys,
         sppp=_sppp(sppp),
         sppi=_sppi(sppi),
-        **_render_options(spp, seed_grad, sensor, integrator, progress, threads, force),
+        **_render_options(
+            spp if spp_grad is None else spp_grad,
+            seed_grad,
+            sensor,
+            integrator,
+            progress,
+            threads,
+            force,
+        ),
     )
 
 

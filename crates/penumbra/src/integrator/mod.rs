@@ -54,6 +54,12 @@ impl Integrator {
                 Integrator::Direct(DirectIntegrator::projective_from_node(node)?)
             }
             "aov" => Integrator::Aov(AovIntegrator::from_node(node)?),
+            "volpath" | "volpathmis" | "prbvolpath" => {
+                return Err(node.error(
+                    "renders participating media, which are not supported yet; for surfaces, \
+                     use the 'path' integrator (same parameters)",
+                ))
+            }
             other => {
                 return Err(node.error(format!(
                     "unknown integrator plugin '{other}' (Penumbra has: path, prb, prb_basic, \

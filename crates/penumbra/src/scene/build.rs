@@ -2,7 +2,7 @@
 //! once (objects referenced from several places are shared), wires shapes
 //! to their BSDFs and area emitters, and builds the acceleration structure.
 
-use super::{Class, LoadContext, Node, Prop, Scene, ShapeInfo, Value};
+use super::{Class, LoadContext, Node, Prop, Scene, SceneDescription, ShapeInfo, Value};
 use crate::bsdf::Bsdf;
 use crate::emitter::{Emitter, EmitterT};
 use crate::error::Result;
@@ -88,14 +88,6 @@ impl Builder {
     }
 
     fn shape(&mut self, node: &Rc<Node>) -> Result<()> {
-        for medium in ["interior", "exterior"] {
-            if let Some(p) = node.prop(medium) {
-                return Err(node.prop_error(
-                    p,
-                    "participating media are not supported yet; remove the medium reference",
-                ));
-            }
-        }
         let shape = Shape::from_node(node, &mut self.ctx)?;
         let index = self.shapes.len() as u32;
         let bsdf = match node.child("bsdf")? {
@@ -117,11 +109,35 @@ impl Builder {
     }
 }
 
+/// Refuses a scene that uses participating media (not implemented yet) at
+/// the first medium, phase function or volume, whether declared at the top
+/// level or inside a shape (`interior`, `exterior`) or a sensor, before
+/// anything is built.
+fn refuse_media(node: &Node) -> Result<()> {
+    if matches!(node.class, Class::Medium | Class::Phase | Class::Volume) {
+        return Err(node.error(
+            "participating media are not supported yet (Penumbra renders surfaces only); \
+             remove the medium and the references to it (interior, exterior)",
+        ));
+    }
+    for p in &node.props {
+        if let Value::Node(child) = &p.value {
+            refuse_media(child)?;
+        }
+    }
+    Ok(())
+}
+
 impl Scene {
-    /// Builds a scene from the root of a parsed scene description.
-    pub fn from_root(root: &Node) -> Result<Scene> {
+    /// Builds a scene from a parsed scene description.
+    pub fn from_description(desc: &SceneDescription) -> Result<Scene> {
+        let root = &*desc.root;
+        refuse_media(root)?;
         let mut b = Builder {
-            ctx: LoadContext::default(),
+            ctx: LoadContext {
+                resolver: desc.resolver.clone(),
+                ..LoadContext::default()
+            },
             bsdfs: Vec::new(),
             bsdf_of_node: HashMap::new(),
             shapes: Vec::new(),
@@ -156,9 +172,7 @@ impl Scene {
                 // textures are built where they are used (and shared there)
                 Class::Texture => {}
                 Class::Medium | Class::Phase | Class::Volume => {
-                    return Err(
-                        node.error("participating media are not supported yet (only surfaces)")
-                    )
+                    unreachable!("refused by refuse_media")
                 }
                 Class::Film | Class::Rfilter | Class::Sampler | Class::Scene => {
                     return Err(node.error(format!(
@@ -213,6 +227,34 @@ impl Scene {
 mod tests {
     use super::Scene;
     use std::path::Path;
+
+    #[test]
+    fn participating_media_are_refused_in_one_line() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bad_scenes");
+        for (file, line, needle) in [
+            (
+                "medium_interior.xml",
+                6,
+                "medium 'homogeneous' (id 'fog'): participating media",
+            ),
+            (
+                "medium_sensor.xml",
+                9,
+                "medium 'homogeneous': participating media",
+            ),
+            (
+                "volpath.xml",
+                3,
+                "integrator 'volpath': renders participating media",
+            ),
+        ] {
+            let p = dir.join(file);
+            let e = Scene::load_file(&p, &[]).unwrap_err().to_string();
+            let prefix = format!("{}:{line}: ", p.display());
+            assert!(e.starts_with(&prefix), "expected '{prefix}' in: {e}");
+            assert!(e.contains(needle) && !e.contains('\n'), "{e}");
+        }
+    }
 
     #[test]
     fn default_bsdf_is_black_on_area_lights_only() {

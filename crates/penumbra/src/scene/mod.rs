@@ -2,10 +2,13 @@
 //! the assembled [`Scene`] that integrators render.
 
 mod props;
+mod resolver;
+mod upgrade;
 pub mod xml;
 
 pub use props::{Class, Node, Prop, Value};
-pub use xml::{child_key, parse_file, parse_str};
+pub use resolver::FileResolver;
+pub use xml::{child_key, parse_file, parse_str, SceneDescription};
 
 use crate::error::{Error, Result};
 use crate::params::{ParamStore, ParamView};
@@ -23,30 +26,34 @@ pub struct LoadContext {
     /// parameters exist once in the store).
     pub(crate) shared_bsdfs: HashMap<*const Node, Bsdf>,
     pub(crate) shared_textures: HashMap<*const Node, Texture>,
+    /// Where relative file names are searched (the main scene file's
+    /// folder and `<path>`s; see [`FileResolver`]).
+    pub resolver: FileResolver,
 }
 
 impl LoadContext {
-    /// Resolves `filename` (parameter `prop` of `node`) relative to the
-    /// directory of the file that declared the node; errors if it does not
-    /// exist.
+    /// Finds `filename` (parameter `prop` of `node`) with the scene's file
+    /// resolver; errors, naming the folders searched, if it does not exist.
     pub fn resolve_path(&self, node: &Node, prop: &str, filename: &str) -> Result<PathBuf> {
-        let p = PathBuf::from(filename);
-        let full = if p.is_absolute() {
-            p
-        } else {
-            node.loc.file.parent().map(|d| d.join(&p)).unwrap_or(p)
-        };
-        if !full.is_file() {
-            return Err(Error::scene(
-                &node.loc,
-                format!(
-                    "{node}: file '{}' (parameter '{prop}') not found; looked for {}",
-                    filename,
-                    full.display()
-                ),
-            ));
-        }
-        Ok(full)
+        self.resolver
+            .resolve(filename)
+            .filter(|p| p.is_file())
+            .ok_or_else(|| {
+                node.prop(prop).map_or_else(
+                    || node.error(format!("file '{filename}' not found")),
+                    |p| {
+                        node.prop_error(
+                            p,
+                            format!(
+                                "file '{filename}' not found (looked in: {}); declare its \
+                                 folder with <path value=\"...\"/> or give its path relative to \
+                                 the scene file",
+                                self.resolver.describe()
+                            ),
+                        )
+                    },
+                )
+            })
     }
 }
 
@@ -97,15 +104,13 @@ pub struct Scene {
 impl Scene {
     /// Loads a Mitsuba 3 XML scene; `defines` override its `<default>`s.
     pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
-        let root = xml::parse_file(path, defines)?;
-        Scene::from_root(&root)
+        Scene::from_description(&xml::parse_file(path, defines)?)
     }
 
     /// Loads a scene from XML text; `path` names it in error messages and
     /// is the base of relative file names.
     pub fn load_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene> {
-        let root = xml::parse_str(text, path, defines)?;
-        Scene::from_root(&root)
+        Scene::from_description(&xml::parse_str(text, path, defines)?)
     }
 
     /// Sensor `i`, or an error naming how many there are.

@@ -1,22 +1,29 @@
-//! The Mitsuba 3 XML scene format (version 3.x) → a tree of [`Node`]s.
+//! The Mitsuba 3 XML scene format → a tree of [`Node`]s.
 //!
-//! Parsing happens in two passes:
+//! Parsing happens in three steps:
 //! 1. *lowering*: the XML text (via `roxmltree`) becomes an owned element
 //!    tree; `<default>` values are recorded in document order, `$name`
-//!    references in attribute values are substituted, and `<include>`d files
-//!    are spliced in place;
-//! 2. *building*: elements become plugin [`Node`]s with typed [`Prop`]s;
-//!    `<transform>` operations are composed, `<ref>`s resolved, and every
-//!    nested object receives its parameter-key prefix (as Mitsuba's
-//!    `traverse()` names parameters).
+//!    references in attribute values are substituted, `<path>` search
+//!    folders are added to the file's [`FileResolver`], and `<include>`d
+//!    files (found by that resolver) are spliced in place;
+//! 2. *upgrade*: elements of files of an older scene version are rewritten
+//!    to Mitsuba 3's names ([`super::upgrade`]);
+//! 3. *building*: elements become plugin [`Node`]s with typed [`Prop`]s;
+//!    `<transform>` operations are composed, `<ref>`s resolved (also to
+//!    objects declared later in the file, as in Mitsuba), and every nested
+//!    object receives its parameter-key prefix (as Mitsuba's `traverse()`
+//!    names parameters).
 //!
 //! Plugins are not constructed here: that is done from the returned tree.
 
 use super::props::{Class, Node, Prop, Value};
+use super::resolver::FileResolver;
+use super::upgrade::{self, Version};
 use crate::error::{Error, Result, SrcLoc};
 use crate::math::Transform;
 use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
+use std::ops::Deref;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
@@ -53,42 +60,66 @@ const PROPERTY_TAGS: &[&str] = &[
 /// Operations allowed inside `<transform>`.
 const TRANSFORM_OPS: &[&str] = &["translate", "rotate", "scale", "matrix", "lookat"];
 
+/// A parsed scene: its tree of objects, and the file resolver with which
+/// its plugins find their files (the main file's, see [`FileResolver`]).
+/// It dereferences to the root node.
+#[derive(Debug)]
+pub struct SceneDescription {
+    pub root: Rc<Node>,
+    pub resolver: FileResolver,
+}
+
+impl Deref for SceneDescription {
+    type Target = Node;
+    fn deref(&self) -> &Node {
+        &self.root
+    }
+}
+
 /// Parses a scene file. `defines` are `-D name=value` overrides of <default> values.
-pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Node>> {
+pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<SceneDescription> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::file(path, format!("cannot read scene file: {e}")))?;
     parse_str(&text, path, defines)
 }
 
-/// Parses scene text; `path` names it in messages and is the base for relative <include>s.
-pub fn parse_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Rc<Node>> {
+/// Parses scene text; `path` names it in messages, and its folder is where
+/// relative file names are searched first.
+pub fn parse_str(
+    text: &str,
+    path: &Path,
+    defines: &[(String, String)],
+) -> Result<SceneDescription> {
     let mut lowerer = Lowerer {
         vars: defines.iter().cloned().collect(),
         known: Vec::new(),
         include_stack: vec![canonical(path)],
+        resolvers: Vec::new(),
+        versions: Vec::new(),
     };
-    let root = lowerer.load(text, path)?;
+    let (mut root, resolver) = lowerer.load(text, path)?;
     lowerer.check_defines(defines, &root.loc)?;
-    if root.tag != "scene" {
-        return Err(root.err(format!(
-            "the root element is <{}>; a scene file's root must be <scene version=\"3.0.0\">",
-            root.tag
-        )));
-    }
-    check_version(&root, true)?;
     root.check_attrs(&["version", "type"])?;
     if let Some(t) = root.attr("type") {
         if t != "scene" {
             return Err(root.err(format!("<scene type='{t}'>: only the type 'scene' exists")));
         }
     }
+    upgrade::upgrade(&mut root);
+    let mut declared = HashMap::new();
+    declare_ids(&root, &mut declared)?;
     let mut builder = Builder {
-        ids: HashMap::new(),
+        declared,
+        built: HashMap::new(),
+        building: Vec::new(),
         unnamed: 0,
     };
     let mut node = Node::new(Class::Scene, "scene", None, String::new(), root.loc.clone());
     builder.fill(&mut node, &root, true)?;
-    Ok(Rc::new(node))
+    Ok(SceneDescription {
+        root: Rc::new(node),
+        resolver,
+    })
 }
 
 /// The parameter-key prefix of a nested object (shared with the Python dict loader later).
@@ -112,15 +143,17 @@ fn canonical(path: &Path) -> PathBuf {
 
 /// An XML element after `$name` substitution and `<include>` expansion.
 #[derive(Debug)]
-struct Elem {
-    tag: String,
-    attrs: Vec<(String, String)>,
-    children: Vec<Elem>,
-    loc: SrcLoc,
+pub(super) struct Elem {
+    pub(super) tag: String,
+    pub(super) attrs: Vec<(String, String)>,
+    pub(super) children: Vec<Elem>,
+    pub(super) loc: SrcLoc,
+    /// The scene version of the file the element is written in.
+    pub(super) version: Version,
 }
 
 impl Elem {
-    fn attr(&self, name: &str) -> Option<&str> {
+    pub(super) fn attr(&self, name: &str) -> Option<&str> {
         self.attrs
             .iter()
             .find(|(k, _)| k == name)
@@ -158,33 +191,6 @@ impl Elem {
     }
 }
 
-/// Checks `<scene version="3.x.y">`; `required` is false for included files.
-fn check_version(scene: &Elem, required: bool) -> Result<()> {
-    let Some(v) = scene.attr("version") else {
-        if required {
-            return Err(scene.err(
-                "the <scene> tag has no 'version' attribute; Penumbra reads Mitsuba 3 scene \
-                 files: write <scene version=\"3.0.0\">",
-            ));
-        }
-        return Ok(());
-    };
-    let major = v.trim().split('.').next().unwrap_or("").parse::<u32>();
-    match major {
-        Ok(3) => Ok(()),
-        Ok(m) if m < 3 => Err(scene.err(format!(
-            "scene version '{v}' is a Mitsuba {} file, which Penumbra does not support; it \
-             reads Mitsuba 3 scene files (version 3.x): update the plugin and parameter names \
-             to Mitsuba 3's documentation and write <scene version=\"3.0.0\">",
-            if m == 2 { "2" } else { "0.x" }
-        ))),
-        _ => Err(scene.err(format!(
-            "unsupported scene version '{v}'; Penumbra reads Mitsuba 3 scene files \
-             (version=\"3.x.y\")"
-        ))),
-    }
-}
-
 struct Lowerer {
     /// `$name` values: the defines, then `<default>`s not overridden.
     vars: HashMap<String, String>,
@@ -193,11 +199,16 @@ struct Lowerer {
     known: Vec<String>,
     /// Canonical paths of the files being read (for include cycles).
     include_stack: Vec<PathBuf>,
+    /// The file resolver of each file being read (the innermost last).
+    resolvers: Vec<FileResolver>,
+    /// The scene version of each file being read (the innermost last).
+    versions: Vec<Version>,
 }
 
 impl Lowerer {
-    /// Parses `text` (the contents of `path`) and lowers its root element.
-    fn load(&mut self, text: &str, path: &Path) -> Result<Elem> {
+    /// Parses `text` (the contents of `path`) and lowers its root element;
+    /// returns it with the file's resolver as it is at the end of the file.
+    fn load(&mut self, text: &str, path: &Path) -> Result<(Elem, FileResolver)> {
         let opts = roxmltree::ParsingOptions {
             allow_dtd: true,
             ..Default::default()
@@ -212,7 +223,50 @@ impl Lowerer {
                 format!("malformed XML: {e}"),
             )
         })?;
-        self.lower(doc.root_element(), path)
+        let root = doc.root_element();
+        let loc = SrcLoc {
+            file: path.to_path_buf(),
+            line: doc.text_pos_at(root.range().start).row,
+        };
+        let main = self.versions.is_empty();
+        let tag = root.tag_name().name();
+        if main && tag != "scene" {
+            return Err(Error::scene(
+                &loc,
+                format!(
+                    "the root element is <{tag}>; a scene file's root must be <scene \
+                     version=\"3.0.0\">"
+                ),
+            ));
+        }
+        let version = match (root.attribute("version"), self.versions.last()) {
+            (Some(v), _) => Version::parse(v).ok_or_else(|| {
+                Error::scene(
+                    &loc,
+                    format!(
+                        "invalid scene version '{v}': write three numbers, as in \
+                         <scene version=\"3.0.0\">"
+                    ),
+                )
+            })?,
+            // an included file without a version is read as its includer
+            (None, Some(&including)) => including,
+            (None, None) => {
+                return Err(Error::scene(
+                    &loc,
+                    "the <scene> tag has no 'version' attribute; write <scene \
+                     version=\"3.0.0\"> for a Mitsuba 3 scene (older versions are upgraded)",
+                ))
+            }
+        };
+        let mut resolver = self.resolvers.last().cloned().unwrap_or_default();
+        resolver.prepend(path.parent().unwrap_or(Path::new("")));
+        self.resolvers.push(resolver);
+        self.versions.push(version);
+        let elem = self.lower(root, path);
+        self.versions.pop();
+        let resolver = self.resolvers.pop().expect("pushed above");
+        Ok((elem?, resolver))
     }
 
     fn lower(&mut self, node: roxmltree::Node, path: &Path) -> Result<Elem> {
@@ -235,16 +289,22 @@ impl Lowerer {
             attrs,
             children: Vec::new(),
             loc,
+            version: *self.versions.last().expect("lowered within load"),
         };
+        let file_root = node.parent().is_some_and(|p| p.is_root());
         for c in node.children().filter(|c| c.is_element()) {
             match c.tag_name().name() {
+                "path" => {
+                    let p = self.lower(c, path)?;
+                    self.search_path(&p, file_root)?;
+                }
                 "default" => {
                     let d = self.lower(c, path)?;
                     self.default(&d)?;
                 }
                 "include" => {
                     let inc = self.lower(c, path)?;
-                    self.include(&inc, path, &mut elem.children)?;
+                    self.include(&inc, &mut elem.children)?;
                 }
                 _ => elem.children.push(self.lower(c, path)?),
             }
@@ -298,17 +358,44 @@ impl Lowerer {
         ))
     }
 
-    /// `<include filename="…"/>`: the included file's `<scene>` children (or
-    /// its single root object) are spliced in place.
-    fn include(&mut self, inc: &Elem, path: &Path, out: &mut Vec<Elem>) -> Result<()> {
+    /// `<path value="…"/>`: a folder searched before the others by the
+    /// current file's resolver (a relative one is found by that resolver).
+    fn search_path(&mut self, p: &Elem, file_root: bool) -> Result<()> {
+        if !file_root {
+            return Err(p.err(
+                "<path> adds a search folder for the whole file: put it directly inside the \
+                 file's <scene>",
+            ));
+        }
+        p.check_attrs(&["value"])?;
+        let value = p.req_attr("value")?;
+        let resolver = self.resolvers.last_mut().expect("lowered within load");
+        let dir = resolver
+            .resolve(value)
+            .filter(|d| d.is_dir())
+            .ok_or_else(|| {
+                p.err(format!(
+                    "<path value='{value}'>: folder not found (looked in: {})",
+                    resolver.describe()
+                ))
+            })?;
+        resolver.prepend(&dir);
+        Ok(())
+    }
+
+    /// `<include filename="…"/>`: the file (found by the current file's
+    /// resolver) is read; its `<scene>` children (or its single root
+    /// object) are spliced in place.
+    fn include(&mut self, inc: &Elem, out: &mut Vec<Elem>) -> Result<()> {
         inc.check_attrs(&["filename"])?;
         let filename = inc.req_attr("filename")?;
-        let rel = PathBuf::from(filename);
-        let full = if rel.is_absolute() {
-            rel
-        } else {
-            path.parent().map(|d| d.join(&rel)).unwrap_or(rel)
-        };
+        let resolver = self.resolvers.last().expect("lowered within load");
+        let full = resolver.resolve(filename).ok_or_else(|| {
+            inc.err(format!(
+                "cannot read included file '{filename}': not found (looked in: {})",
+                resolver.describe()
+            ))
+        })?;
         let text = std::fs::read_to_string(&full).map_err(|e| {
             inc.err(format!(
                 "cannot read included file '{filename}' (looked for {}): {e}",
@@ -334,13 +421,14 @@ impl Lowerer {
             )));
         }
         self.include_stack.push(canon);
-        let root = self.load(&text, &full)?;
+        let (mut root, _) = self.load(&text, &full)?;
         self.include_stack.pop();
         if root.tag == "scene" {
-            check_version(&root, false)?;
             root.check_attrs(&["version", "type"])?;
             out.extend(root.children);
         } else {
+            // the version of the file, not an attribute of the object
+            root.attrs.retain(|(k, _)| k != "version");
             out.push(root);
         }
         Ok(())
@@ -394,16 +482,42 @@ impl Lowerer {
 // ---------------------------------------------------------------------------
 // Pass 2: elements → nodes
 
-struct Builder {
-    /// Objects declared with an id so far.
-    ids: HashMap<String, Rc<Node>>,
+/// Collects every object declared with an id, anywhere in the tree (a
+/// `<ref>` may name an object declared later, as in Mitsuba); ids must be
+/// unique.
+fn declare_ids<'a>(e: &'a Elem, declared: &mut HashMap<&'a str, &'a Elem>) -> Result<()> {
+    for c in &e.children {
+        if let (Some(_), Some(id)) = (Class::from_tag(&c.tag), c.attr("id")) {
+            if let Some(prev) = declared.insert(id, c) {
+                return Err(c.err(format!(
+                    "duplicate id '{id}': it is already used by the <{}> declared at {}; ids \
+                     must be unique",
+                    prev.tag, prev.loc
+                )));
+            }
+        }
+        declare_ids(c, declared)?;
+    }
+    Ok(())
+}
+
+struct Builder<'a> {
+    /// Every object declared with an id.
+    declared: HashMap<&'a str, &'a Elem>,
+    /// The objects with an id built so far (a `<ref>` may have built one
+    /// before its declaration is reached).
+    built: HashMap<String, Rc<Node>>,
+    /// Ids of the objects being built, outermost first (a `<ref>` to one of
+    /// them is a cycle).
+    building: Vec<String>,
     /// Counter for `_unnamed_<n>` top-level objects.
     unnamed: usize,
 }
 
-impl Builder {
-    /// Builds the object declared by `e` (a plugin tag).
-    fn object(&mut self, e: &Elem, class: Class, key: String) -> Result<Rc<Node>> {
+impl<'a> Builder<'a> {
+    /// Builds the object declared by `e` (a plugin tag), or returns it if a
+    /// `<ref>` built it already.
+    fn object(&mut self, e: &'a Elem, class: Class, key: String) -> Result<Rc<Node>> {
         e.check_attrs(&["type", "id", "name"])?;
         let plugin = e.attr("type").ok_or_else(|| {
             e.err(format!(
@@ -416,33 +530,53 @@ impl Builder {
             if id.is_empty() {
                 return Err(e.err(format!("<{}>: the id must not be empty", e.tag)));
             }
-            self.check_unique_id(e, id)?;
+            if let Some(node) = self.built.get(id) {
+                return Ok(node.clone());
+            }
+            self.building.push(id.to_string());
         }
         let mut node = Node::new(class, plugin, id.map(str::to_string), key, e.loc.clone());
         self.fill(&mut node, e, false)?;
         let node = Rc::new(node);
         if let Some(id) = id {
-            self.check_unique_id(e, id)?;
-            self.ids.insert(id.to_string(), node.clone());
+            self.building.pop();
+            self.built.insert(id.to_string(), node.clone());
         }
         Ok(node)
     }
 
-    fn check_unique_id(&self, e: &Elem, id: &str) -> Result<()> {
-        match self.ids.get(id) {
-            Some(prev) => Err(e.err(format!(
-                "duplicate id '{id}': it is already used by the {prev} declared at {}; ids must \
-                 be unique",
-                prev.loc
-            ))),
-            None => Ok(()),
+    /// The object `<ref id="…">` (`c`) names, built on first use.
+    fn reference(&mut self, c: &Elem, id: &str) -> Result<Rc<Node>> {
+        if let Some(node) = self.built.get(id) {
+            return Ok(node.clone());
         }
+        if let Some(i) = self.building.iter().position(|b| b == id) {
+            return Err(c.err(format!(
+                "<ref id='{id}'>: circular reference {} -> {id}; an object cannot contain itself",
+                self.building[i..].join(" -> ")
+            )));
+        }
+        let Some(&decl) = self.declared.get(id) else {
+            let mut known: Vec<&str> = self.declared.keys().copied().collect();
+            known.sort_unstable();
+            let known = if known.is_empty() {
+                "none".to_string()
+            } else {
+                known.join(", ")
+            };
+            return Err(c.err(format!(
+                "<ref id='{id}'>: no object with id '{id}' is declared in the scene (ids \
+                 declared: {known}); check the spelling"
+            )));
+        };
+        let class = Class::from_tag(&decl.tag).expect("declared objects have a plugin tag");
+        // keyed by its id wherever it is built
+        self.object(decl, class, id.to_string())
     }
 
-    /// The object an unnamed child `c` (index `i` of `parent`) would
-    /// contribute, as a tag, for the `<tag>_<n>` naming of several unnamed
-    /// objects of one kind.
-    fn unnamed_tag(&self, parent: &Elem, i: usize, c: &Elem) -> Option<&'static str> {
+    /// The object an unnamed child `c` would contribute, as a tag, for the
+    /// `<tag>_<n>` naming of several unnamed objects of one kind.
+    fn unnamed_tag(&self, c: &Elem) -> Option<&'static str> {
         if c.attr("name").is_some() {
             return None;
         }
@@ -450,29 +584,17 @@ impl Builder {
             return Some(class.tag());
         }
         if c.tag == "ref" {
-            let id = c.attr("id")?;
-            if let Some(n) = self.ids.get(id) {
-                return Some(n.class.tag());
-            }
-            // declared by an earlier sibling (not yet registered)
-            return parent.children[..i]
-                .iter()
-                .find(|s| s.attr("id") == Some(id))
-                .and_then(|s| Class::from_tag(&s.tag))
-                .map(Class::tag);
+            let decl = self.declared.get(c.attr("id")?)?;
+            return Class::from_tag(&decl.tag).map(Class::tag);
         }
         None
     }
 
     /// Adds the properties and nested objects declared inside `e` to `node`.
-    fn fill(&mut self, node: &mut Node, e: &Elem, top_level: bool) -> Result<()> {
+    fn fill(&mut self, node: &mut Node, e: &'a Elem, top_level: bool) -> Result<()> {
         // several unnamed children of one tag are named <tag>_0, <tag>_1, …
-        let tags: Vec<Option<&'static str>> = e
-            .children
-            .iter()
-            .enumerate()
-            .map(|(i, c)| self.unnamed_tag(e, i, c))
-            .collect();
+        let tags: Vec<Option<&'static str>> =
+            e.children.iter().map(|c| self.unnamed_tag(c)).collect();
         let mut total: HashMap<&str, usize> = HashMap::new();
         for t in tags.iter().flatten() {
             *total.entry(t).or_default() += 1;
@@ -517,19 +639,7 @@ impl Builder {
             } else if tag_s == "ref" {
                 c.check_attrs(&["id", "name"])?;
                 let id = c.req_attr("id")?;
-                let target = self.ids.get(id).cloned().ok_or_else(|| {
-                    let mut known: Vec<&str> = self.ids.keys().map(String::as_str).collect();
-                    known.sort_unstable();
-                    let known = if known.is_empty() {
-                        "none so far".to_string()
-                    } else {
-                        known.join(", ")
-                    };
-                    c.err(format!(
-                        "<ref id='{id}'>: no object with id '{id}' has been declared (known ids: \
-                         {known}); declare it before use"
-                    ))
-                })?;
+                let target = self.reference(c, id)?;
                 let name = match c.attr("name") {
                     Some(n) => n.to_string(),
                     None => match tag {
@@ -829,7 +939,7 @@ mod tests {
 
     const HEAD: &str = "<scene version=\"3.0.0\">\n";
 
-    fn parse(text: &str) -> Result<Rc<Node>> {
+    fn parse(text: &str) -> Result<SceneDescription> {
         parse_str(text, Path::new("t.xml"), &[])
     }
 
@@ -845,7 +955,7 @@ mod tests {
         crate::testing::repo_file("scenes")
     }
 
-    fn load_ref(name: &str, defines: &[(String, String)]) -> Rc<Node> {
+    fn load_ref(name: &str, defines: &[(String, String)]) -> SceneDescription {
         let p = crate::testing::repo_file(&format!("scenes/{name}"));
         parse_file(&p, defines).unwrap_or_else(|e| panic!("{name}: {e}"))
     }
@@ -1105,12 +1215,12 @@ mod tests {
             &child(&child(&root, "other"), "reflectance"),
             &tex
         ));
-        // a ref to an enclosing object (a cycle) is not declared yet
+        // a ref to an enclosing object is a cycle
         let e = err(&format!(
             "{HEAD}<bsdf type=\"blendbsdf\" id=\"b\">\n<ref id=\"b\"/>\n</bsdf></scene>"
         ));
         assert!(
-            e.starts_with("t.xml:3:") && e.contains("no object with id 'b'"),
+            e.starts_with("t.xml:3:") && e.contains("circular reference b -> b"),
             "{e}"
         );
     }
@@ -1211,6 +1321,138 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
+    #[test]
+    fn files_are_found_through_the_search_paths_as_in_mitsuba() {
+        let d = temp_dir("paths");
+        for sub in ["assets", "inc", "other"] {
+            std::fs::create_dir_all(d.join(sub)).unwrap();
+        }
+        let scene = |body: &str| format!("<scene version=\"3.0.0\">\n{body}\n</scene>\n");
+        let write = |name: &str, body: &str| std::fs::write(d.join(name), scene(body)).unwrap();
+        std::fs::write(d.join("assets/mesh.obj"), "").unwrap();
+        std::fs::write(d.join("other/o.obj"), "").unwrap();
+        // the included file's own folder, then its includer's list (the
+        // scene folder and the scene's paths)
+        write(
+            "inc/a.xml",
+            "<path value=\"../other\"/>\n<include filename=\"b.xml\"/>\n\
+             <include filename=\"c.xml\"/>\n<include filename=\"d.xml\"/>",
+        );
+        write("inc/b.xml", "<bsdf type=\"diffuse\" id=\"b\"/>");
+        write("c.xml", "<bsdf type=\"diffuse\" id=\"c\"/>");
+        write("assets/d.xml", "<bsdf type=\"diffuse\" id=\"d\"/>");
+        write(
+            "main.xml",
+            "<path value=\"assets\"/>\n<include filename=\"inc/a.xml\"/>",
+        );
+        let desc = parse_file(&d.join("main.xml"), &[]).unwrap();
+        for (id, file) in [("b", "inc/b.xml"), ("c", "c.xml"), ("d", "assets/d.xml")] {
+            assert_eq!(child(&desc, id).loc.file, d.join(file));
+        }
+        // plugins search the main file's paths, then its folder; a <path>
+        // of an included file only serves that file's <include>s
+        assert_eq!(
+            desc.resolver.resolve("mesh.obj"),
+            Some(d.join("assets/mesh.obj"))
+        );
+        assert_eq!(desc.resolver.resolve("c.xml"), Some(d.join("c.xml")));
+        assert_eq!(desc.resolver.resolve("o.obj"), None);
+
+        write(
+            "nested.xml",
+            "<shape type=\"obj\">\n<path value=\"assets\"/></shape>",
+        );
+        let e = parse_file(&d.join("nested.xml"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nested.xml:3:") && e.contains("directly inside the file's <scene>"),
+            "{e}"
+        );
+        write("missing.xml", "\n<path value=\"textures\"/>");
+        let e = parse_file(&d.join("missing.xml"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("missing.xml:3:") && e.contains("<path value='textures'>: folder not found"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn refs_may_precede_the_declaration() {
+        let root = parse(&format!(
+            "{HEAD}<shape type=\"sphere\" id=\"s\"><ref id=\"m\"/></shape>\n\
+             <shape type=\"sphere\" id=\"t\"><ref name=\"bsdf\" id=\"tex_user\"/></shape>\n\
+             <bsdf type=\"diffuse\" id=\"m\"/>\n\
+             <shape type=\"sphere\"><bsdf type=\"diffuse\" id=\"tex_user\">\n\
+               <ref name=\"reflectance\" id=\"checks\"/></bsdf></shape>\n\
+             <texture type=\"checkerboard\" id=\"checks\"/>\n\
+             </scene>"
+        ))
+        .unwrap();
+        let m = child(&root, "m");
+        assert_eq!((m.key.as_str(), m.loc.line), ("m", 4));
+        assert!(Rc::ptr_eq(&child(&child(&root, "s"), "bsdf"), &m));
+        // a forward ref to an object nested in a later one, itself with a
+        // forward ref
+        let user = child(&child(&root, "t"), "bsdf");
+        assert_eq!(user.key, "tex_user");
+        assert!(Rc::ptr_eq(
+            &child(&child(&root, "_unnamed_0"), "bsdf"),
+            &user
+        ));
+        assert!(Rc::ptr_eq(
+            &child(&user, "reflectance"),
+            &child(&root, "checks")
+        ));
+        let names: Vec<&str> = root.props.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["s", "t", "m", "_unnamed_0", "checks"]);
+    }
+
+    #[test]
+    fn files_of_older_versions_are_upgraded() {
+        let root = parse(
+            "<scene version=\"0.6.0\">\n\
+             <integrator type=\"path\"><integer name=\"maxDepth\" value=\"3\"/></integrator>\n\
+             <sensor type=\"perspective\"><string name=\"fovAxis\" value=\"x\"/>\n\
+               <transform name=\"toWorld\"><translate z=\"5\"/></transform></sensor>\n\
+             <shape type=\"sphere\"><bsdf type=\"dielectric\">\n\
+               <float name=\"intIOR\" value=\"1.5\"/></bsdf></shape>\n\
+             <bsdf type=\"diffuse\" id=\"d\"><texture type=\"bitmap\" name=\"diffuseReflectance\">\n\
+               <float name=\"uscale\" value=\"2\"/><float name=\"voffset\" value=\"0.5\"/>\n\
+             </texture></bsdf>\n\
+             <bsdf type=\"roughconductor\" id=\"r\"><rgb name=\"diffuseReflectance\" value=\"1\"/></bsdf>\n\
+             </scene>",
+        )
+        .unwrap();
+        let integ = child(&root, "_unnamed_0");
+        assert_eq!(integ.int("max_depth", 0).unwrap(), 3);
+        let sensor = child(&root, "_unnamed_1");
+        assert_eq!(sensor.string("fov_axis", "").unwrap(), "x");
+        let t = sensor.transform("to_world").unwrap();
+        assert!(close(t.point(Vec3::ZERO), Vec3::new(0.0, 0.0, 5.0)));
+        let glass = child(&child(&root, "_unnamed_2"), "bsdf");
+        assert_eq!(glass.float("int_ior", 0.0).unwrap(), 1.5);
+        // diffuse's diffuseReflectance is its reflectance; the uv scale and
+        // offset are a to_uv transform: translate, then scale
+        let tex = child(&child(&root, "d"), "reflectance");
+        assert!(!tex.has("uscale") && !tex.has("voffset"));
+        let uv = tex.transform("to_uv").unwrap();
+        assert!(close(uv.point(Vec3::ZERO), Vec3::new(0.0, 0.5, 0.0)));
+        assert!(close(uv.point(Vec3::X), Vec3::new(2.0, 0.5, 0.0)));
+        // renamed for diffuse only, as in Mitsuba
+        assert!(child(&root, "r").has("diffuse_reflectance"));
+        // from 2.0.0 on, names are kept
+        let root = parse(
+            "<scene version=\"2.1.0\"><integrator type=\"path\">\n\
+             <integer name=\"maxDepth\" value=\"3\"/></integrator></scene>",
+        )
+        .unwrap();
+        assert!(child(&root, "_unnamed_0").has("maxDepth"));
+    }
+
     /// Each entry: (scene text, line of the error, words the message must contain).
     #[test]
     fn bad_inputs_give_located_messages() {
@@ -1262,9 +1504,8 @@ mod tests {
                 &["undefined variable '$spp'", "<default name=\"spp\"", "-D spp="],
             ),
             ("<scene>\n</scene>", 1, &["'version'", "Mitsuba 3"]),
-            ("\n<scene version=\"2.0.0\">\n</scene>", 2, &["'2.0.0'", "Mitsuba 2", "not support"]),
-            ("<scene version=\"0.6.0\">\n</scene>", 1, &["'0.6.0'", "Mitsuba 0.x"]),
-            ("<scene version=\"banana\">\n</scene>", 1, &["unsupported scene version 'banana'"]),
+            ("\n<scene version=\"2.0\">\n</scene>", 2, &["invalid scene version '2.0'"]),
+            ("<scene version=\"banana\">\n</scene>", 1, &["invalid scene version 'banana'"]),
             (
                 "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='eta' value='400:1.5, 700:1.4'/></bsdf></scene>",
                 3,
@@ -1288,7 +1529,7 @@ mod tests {
             (
                 "<scene version=\"3.0.0\">\n<bsdf type=\"x\" id=\"red\"/>\n<shape type=\"y\">\n<ref id=\"blue\"/></shape></scene>",
                 4,
-                &["'blue'", "known ids: red", "declare it before use"],
+                &["'blue'", "ids declared: red", "check the spelling"],
             ),
             (
                 "<scene version=\"3.0.0\">\n<bsdf type=\"x\" id=\"red\"/>\n<shape type=\"y\" id=\"red\"/></scene>",
@@ -1390,7 +1631,7 @@ mod tests {
             ("missing_include.xml", 4, "does_not_exist.xml"),
             ("undefined_variable.xml", 6, "'$spp'"),
             ("bad_number.xml", 5, "found 'abc'"),
-            ("mitsuba2_version.xml", 3, "Mitsuba 2"),
+            ("invalid_version.xml", 3, "invalid scene version '2.0'"),
             ("unknown_ref.xml", 6, "'blue'"),
         ];
         for (file, line, needle) in cases {
