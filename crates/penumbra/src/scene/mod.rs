@@ -2,6 +2,7 @@
 //! the assembled [`Scene`] that integrators render.
 
 mod props;
+pub mod spectrum;
 pub mod xml;
 
 pub use props::{Class, Node, Prop, Value};
