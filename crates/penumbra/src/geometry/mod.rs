@@ -10,6 +10,7 @@ mod interaction;
 pub mod mesh;
 pub mod obj;
 pub mod ply;
+pub mod serialized;
 pub mod shape;
 pub mod shapes;
 

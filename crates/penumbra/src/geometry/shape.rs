@@ -37,12 +37,20 @@ pub trait ShapeT {
 }
 
 /// Names of the shape plugins, for messages.
-pub const SHAPE_PLUGINS: [&str; 6] = ["ply", "obj", "rectangle", "cube", "sphere", "disk"];
+pub const SHAPE_PLUGINS: [&str; 7] = [
+    "ply",
+    "obj",
+    "serialized",
+    "rectangle",
+    "cube",
+    "sphere",
+    "disk",
+];
 
 /// All shape plugins.
 #[derive(Clone, Debug)]
 pub enum Shape {
-    /// `ply`, `obj`, `rectangle`, `cube`.
+    /// `ply`, `obj`, `serialized`, `rectangle`, `cube`.
     Mesh(Mesh),
     Sphere(Sphere),
     Disk(Disk),
@@ -51,13 +59,14 @@ pub enum Shape {
 impl Shape {
     /// Builds a shape from its scene node. Reads only the geometric
     /// properties (`filename`, `to_world`, `face_normals`, `flip_normals`,
-    /// `flip_tex_coords`, `center`, `radius`); the nested `bsdf`,
+    /// `flip_tex_coords`, `shape_index`, `center`, `radius`); the nested `bsdf`,
     /// `emitter`, `interior`, `exterior` are left to the scene builder.
     /// Registers the shape's parameters in `ctx.store` under `node.key`.
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Shape> {
         Ok(match node.plugin.as_str() {
             "ply" => Shape::Mesh(shapes::ply::load(node, ctx)?),
             "obj" => Shape::Mesh(shapes::obj::load(node, ctx)?),
+            "serialized" => Shape::Mesh(shapes::serialized::load(node, ctx)?),
             "rectangle" => Shape::Mesh(shapes::rectangle::load(node, ctx)?),
             "cube" => Shape::Mesh(shapes::cube::load(node, ctx)?),
             "sphere" => Shape::Sphere(Sphere::load(node, ctx)?),

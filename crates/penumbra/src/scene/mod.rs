@@ -3,6 +3,7 @@
 
 mod props;
 mod resolver;
+pub mod spectrum;
 mod upgrade;
 pub mod xml;
 

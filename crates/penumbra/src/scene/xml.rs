@@ -18,6 +18,7 @@
 
 use super::props::{Class, Node, Prop, Value};
 use super::resolver::FileResolver;
+use super::spectrum::{self, SpectrumUse};
 use super::upgrade::{self, Version};
 use crate::error::{Error, Result, SrcLoc};
 use crate::math::Transform;
@@ -113,6 +114,7 @@ pub fn parse_str(
         built: HashMap::new(),
         building: Vec::new(),
         unnamed: 0,
+        resolver: &resolver,
     };
     let mut node = Node::new(Class::Scene, "scene", None, String::new(), root.loc.clone());
     builder.fill(&mut node, &root, true)?;
@@ -512,6 +514,9 @@ struct Builder<'a> {
     building: Vec<String>,
     /// Counter for `_unnamed_<n>` top-level objects.
     unnamed: usize,
+    /// The scene's file resolver (as the plugins' files, `.spd` spectra are
+    /// found by it).
+    resolver: &'a FileResolver,
 }
 
 impl<'a> Builder<'a> {
@@ -649,7 +654,7 @@ impl<'a> Builder<'a> {
                 };
                 push_prop(node, Prop::new(name, Value::Node(target), c.loc.clone()))?;
             } else if PROPERTY_TAGS.contains(&tag_s) {
-                let (name, value) = property(c)?;
+                let (name, value) = property(c, node.class == Class::Emitter, self.resolver)?;
                 push_prop(node, Prop::new(name, value, c.loc.clone()))?;
             } else if TRANSFORM_OPS.contains(&tag_s) {
                 return Err(c.err(format!(
@@ -688,14 +693,23 @@ fn push_prop(node: &mut Node, p: Prop) -> Result<()> {
 // ---------------------------------------------------------------------------
 // Typed properties
 
-/// Parses a typed property element into (name, value).
-fn property(c: &Elem) -> Result<(String, Value)> {
+/// Parses a typed property element into (name, value); `in_emitter` when
+/// it is a property of an `<emitter>` (spectra are converted differently
+/// there).
+fn property(c: &Elem, in_emitter: bool, resolver: &FileResolver) -> Result<(String, Value)> {
     let allowed: &[&str] = match c.tag.as_str() {
         "point" | "vector" => &["name", "value", "x", "y", "z"],
         "spectrum" => &["name", "value", "filename"],
         "transform" => &["name"],
         _ => &["name", "value"],
     };
+    if let (Some(t), "spectrum") = (c.attr("type"), c.tag.as_str()) {
+        return Err(c.err(format!(
+            "{}: spectrum plugins (type '{t}') are not supported yet; give the value as \
+             <rgb>, a constant, wavelength:value pairs or an .spd file",
+            c.describe()
+        )));
+    }
     c.check_attrs(allowed)?;
     let name = c.req_attr("name")?.to_string();
     if c.tag != "transform" {
@@ -745,7 +759,7 @@ fn property(c: &Elem) -> Result<(String, Value)> {
                 }
             }
         }
-        "spectrum" => spectrum(c)?,
+        "spectrum" => spectrum(c, in_emitter, resolver)?,
         "point" => Value::Point(xyz(c, 0.0)?),
         "vector" => Value::Vector(xyz(c, 0.0)?),
         "transform" => Value::Transform(transform(c)?),
@@ -754,30 +768,93 @@ fn property(c: &Elem) -> Result<(String, Value)> {
     Ok((name, value))
 }
 
-fn spectrum(c: &Elem) -> Result<Value> {
-    if c.attr("filename").is_some() {
+/// `<spectrum>`: a constant, `wavelength:value` pairs, or an `.spd` file,
+/// converted to RGB as Mitsuba 3's RGB variants do (see
+/// [`super::spectrum`]); `in_emitter` when it is a direct property of an
+/// `<emitter>`; a file is found by the current file's `resolver`.
+fn spectrum(c: &Elem, in_emitter: bool, resolver: &FileResolver) -> Result<Value> {
+    let name = c.req_attr("name")?;
+    let usage = SpectrumUse::of(name, in_emitter);
+    let (wavelengths, values) = match (c.attr("value"), c.attr("filename")) {
+        (Some(s), None) if !s.contains(':') => {
+            let v = numbers(c, "value", s)?;
+            if v.len() != 1 {
+                return Err(c.err(format!(
+                    "{}: expected one number (a constant spectrum) or wavelength:value pairs, \
+                     found {} numbers",
+                    c.describe(),
+                    v.len()
+                )));
+            }
+            return Ok(match usage {
+                SpectrumUse::Emission => Value::Rgb(spectrum::constant_to_rgb(v[0] as f32, usage)),
+                _ => Value::Spectrum(v[0] as f32),
+            });
+        }
+        (Some(s), None) => wavelength_value_pairs(c, s)?,
+        (None, Some(f)) => spd_file(c, f, resolver)?,
+        _ => {
+            return Err(c.err(format!(
+                "{} needs either a 'value' or a 'filename' attribute",
+                c.describe()
+            )))
+        }
+    };
+    spectrum::check_samples(&wavelengths).map_err(|m| c.err(format!("{}: {m}", c.describe())))?;
+    let (rgb, clamped) = spectrum::samples_to_rgb(&wavelengths, &values, usage);
+    if clamped {
+        crate::warn::warn(format!(
+            "{}: {}: the spectrum's colour is outside the sRGB gamut; clamped to {rgb} (as Mitsuba)",
+            c.loc,
+            c.describe()
+        ));
+    }
+    Ok(Value::Rgb(rgb))
+}
+
+/// `value="400:0.1, 500:0.5"`: wavelengths (nm) and values.
+fn wavelength_value_pairs(c: &Elem, s: &str) -> Result<(Vec<f64>, Vec<f64>)> {
+    s.split(|ch: char| ch == ',' || ch.is_whitespace())
+        .filter(|t| !t.is_empty())
+        .map(|t| match t.split_once(':') {
+            Some((w, v)) => Ok((number(c, "value", w)?, number(c, "value", v)?)),
+            None => Err(c.err(format!(
+                "{}: expected wavelength:value pairs, found '{t}'",
+                c.describe()
+            ))),
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(|pairs| pairs.into_iter().unzip())
+}
+
+/// `filename="x.spd"`, found by `resolver` as every file of the scene:
+/// wavelength/value lines.
+fn spd_file(c: &Elem, filename: &str, resolver: &FileResolver) -> Result<(Vec<f64>, Vec<f64>)> {
+    if !Path::new(filename)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("spd"))
+    {
         return Err(c.err(format!(
-            "{}: spectral data (filename) is not supported in RGB mode; use <rgb>",
+            "{}: spectrum file '{filename}' must be an .spd file (lines of 'wavelength value')",
             c.describe()
         )));
     }
-    let s = c.req_attr("value")?;
-    if s.contains(':') {
-        return Err(c.err(format!(
-            "{}: spectral data is not supported in RGB mode; use <rgb>",
-            c.describe()
-        )));
-    }
-    let v = numbers(c, "value", s)?;
-    if v.len() != 1 {
-        return Err(c.err(format!(
-            "{}: expected a single number (a constant spectrum), found {}; spectral data is \
-             not supported in RGB mode; use <rgb>",
+    let full = resolver.resolve(filename).ok_or_else(|| {
+        c.err(format!(
+            "{}: spectrum file '{filename}' not found (looked in: {})",
             c.describe(),
-            v.len()
-        )));
-    }
-    Ok(Value::Spectrum(v[0] as f32))
+            resolver.describe()
+        ))
+    })?;
+    let text = std::fs::read_to_string(&full).map_err(|e| {
+        c.err(format!(
+            "{}: cannot read spectrum file '{filename}' ({}): {e}",
+            c.describe(),
+            full.display()
+        ))
+    })?;
+    spectrum::parse_spd(&text)
+        .map_err(|m| c.err(format!("{}: {}: {m}", c.describe(), full.display())))
 }
 
 /// One finite number from attribute `attr` of `c`.
@@ -1271,6 +1348,42 @@ mod tests {
     }
 
     #[test]
+    fn spectra_become_rgb_as_in_mitsuba() {
+        // expected values: Mitsuba 3.9.1 (scalar_rgb) loading the same XML
+        let root = parse(&format!(
+            "{HEAD}<bsdf type=\"diffuse\" id=\"b\">\n\
+               <spectrum name=\"reflectance\" value=\"400:0.1, 500:0.5, 600:0.9\"/>\n\
+               <spectrum name=\"eta\" value=\"400:1.5 500:0.5 700:0.2\"/>\n\
+               <spectrum name=\"k\" value=\"3\"/>\n\
+             </bsdf>\n\
+             <emitter type=\"point\" id=\"e\">\n\
+               <spectrum name=\"intensity\" value=\"400:1, 550:3, 700:2\"/>\n\
+             </emitter>\n\
+             <emitter type=\"constant\" id=\"c\">\n\
+               <spectrum name=\"radiance\" value=\"5\"/>\n\
+             </emitter></scene>"
+        ))
+        .unwrap();
+        let b = child(&root, "b");
+        let e = child(&root, "e");
+        let rgb = |n: &Node, name: &str| match n.prop(name).unwrap().value {
+            Value::Rgb(v) => v,
+            ref v => panic!("{name}: {v:?}"),
+        };
+        let near =
+            |a: Vec3, b: [f32; 3]| (a - Vec3::from(b)).abs().max_element() < 2e-4 * a.max_element();
+        assert!(near(rgb(&b, "reflectance"), [0.223602, 0.711799, 0.274743]));
+        assert!(near(rgb(&b, "eta"), [0.309274, 0.402677, 1.0235]));
+        assert!(matches!(b.prop("k").unwrap().value, Value::Spectrum(v) if v == 3.0));
+        assert!(near(rgb(&e, "intensity"), [3.08176, 2.70313, 1.40413]));
+        // a constant on an emitter is a flat emission spectrum, not a grey
+        assert!(near(
+            rgb(&child(&root, "c"), "radiance"),
+            [6.02397, 4.74146, 4.54458]
+        ));
+    }
+
+    #[test]
     fn includes_are_spliced_and_checked() {
         let d = temp_dir("include");
         std::fs::create_dir_all(d.join("sub")).unwrap();
@@ -1507,9 +1620,29 @@ mod tests {
             ("\n<scene version=\"2.0\">\n</scene>", 2, &["invalid scene version '2.0'"]),
             ("<scene version=\"banana\">\n</scene>", 1, &["invalid scene version 'banana'"]),
             (
-                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='eta' value='400:1.5, 700:1.4'/></bsdf></scene>",
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='eta' value='500:1.5, 400:1.4'/></bsdf></scene>",
                 3,
-                &["spectral data is not supported in RGB mode; use <rgb>", "eta"],
+                &["<spectrum name='eta'>", "wavelengths must increase, found 400 after 500"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='r' value='400:0.5, 500'/></bsdf></scene>",
+                3,
+                &["<spectrum name='r'>", "expected wavelength:value pairs, found '500'"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<emitter type=\"x\">\n<spectrum type='blackbody' name='radiance'/></emitter></scene>",
+                3,
+                &["type 'blackbody'", "not supported yet"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='r' filename='r.csv'/></bsdf></scene>",
+                3,
+                &["'r.csv' must be an .spd file"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='r' filename='missing.spd'/></bsdf></scene>",
+                3,
+                &["cannot read spectrum file 'missing.spd'"],
             ),
             (
                 "<scene version=\"3.0.0\">\n<shape type=\"x\"><transform name='to_world'>\n<matrix value='1 0 0 0 0 1 0 0 0 0 0 0 0 0 0 1'/>\n</transform></shape></scene>",

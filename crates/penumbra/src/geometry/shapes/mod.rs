@@ -1,5 +1,5 @@
-//! Shape plugins, one file each. Mesh plugins (`ply`, `obj`, `rectangle`,
-//! `cube`) produce a [`Mesh`](crate::geometry::mesh::Mesh); `sphere` and
+//! Shape plugins, one file each. Mesh plugins (`ply`, `obj`, `serialized`,
+//! `rectangle`, `cube`) produce a [`Mesh`](crate::geometry::mesh::Mesh); `sphere` and
 //! `disk` are analytic.
 
 pub mod cube;
@@ -7,6 +7,7 @@ pub mod disk;
 pub mod obj;
 pub mod ply;
 pub mod rectangle;
+pub mod serialized;
 pub mod sphere;
 
 pub use disk::Disk;

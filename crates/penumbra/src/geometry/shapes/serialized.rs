@@ -1,0 +1,35 @@
+//! The `serialized` shape plugin: one triangle mesh of a Mitsuba
+//! `.serialized` file (format in [`crate::geometry::serialized`]).
+//! Parameters: `filename`, `shape_index` (0: which shape of the file),
+//! `face_normals` (false), `flip_normals` (false), `to_world`.
+
+use crate::error::Result;
+use crate::geometry::mesh::Mesh;
+use crate::geometry::serialized::load_serialized;
+use crate::scene::{LoadContext, Node};
+
+/// Builds the mesh of a `<shape type="serialized">` node.
+pub fn load(node: &Node, ctx: &mut LoadContext) -> Result<Mesh> {
+    let path = super::filename(node, ctx)?;
+    let opts = super::mesh_options(node)?;
+    let index = node.int_min("shape_index", 0, 0)?;
+    let to_world = node.transform("to_world")?;
+    let shape = load_serialized(&path, index as usize).map_err(|e| node.error(e))?;
+    let source = format!("{}@{index}", path.display());
+    if shape.has_colors {
+        crate::warn::warn(format!(
+            "{}: {source}: the file's vertex colors are not used (Penumbra has no mesh attributes)",
+            node.loc
+        ));
+    }
+    Mesh::new(
+        "serialized",
+        &node.key,
+        &source,
+        shape.data,
+        &to_world,
+        opts,
+        &mut ctx.store,
+    )
+    .map_err(|e| node.error(e))
+}
