@@ -1642,7 +1642,7 @@ mod tests {
             (
                 "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='r' filename='missing.spd'/></bsdf></scene>",
                 3,
-                &["cannot read spectrum file 'missing.spd'"],
+                &["spectrum file 'missing.spd' not found"],
             ),
             (
                 "<scene version=\"3.0.0\">\n<shape type=\"x\"><transform name='to_world'>\n<matrix value='1 0 0 0 0 1 0 0 0 0 0 0 0 0 0 1'/>\n</transform></shape></scene>",
