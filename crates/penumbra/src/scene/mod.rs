@@ -1,15 +1,13 @@
-//! Scenes: loading (Mitsuba 3 XML, Python dicts), the plugin registry, and
-//! the assembled [`Scene`] that integrators render.
+//! Scenes: the scene description ([`description`], below the plugins: it
+//! imports none), the [`LoadContext`] plugins are built with, and the
+//! assembly (`build.rs`, above the plugins) of the [`Scene`] that
+//! integrators render.
 
-mod props;
-mod resolver;
-pub mod spectrum;
-mod upgrade;
-pub mod xml;
+pub mod description;
 
-pub use props::{Class, Node, Prop, Value};
-pub use resolver::FileResolver;
-pub use xml::{child_key, parse_file, parse_str, SceneDescription};
+pub use description::{
+    child_key, parse_file, parse_str, Class, FileResolver, Node, Prop, SceneDescription, Value,
+};
 
 use crate::error::{Error, Result};
 use crate::params::{ParamStore, ParamView};
@@ -105,13 +103,13 @@ pub struct Scene {
 impl Scene {
     /// Loads a Mitsuba 3 XML scene; `defines` override its `<default>`s.
     pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
-        Scene::from_description(&xml::parse_file(path, defines)?)
+        Scene::from_description(&parse_file(path, defines)?)
     }
 
     /// Loads a scene from XML text; `path` names it in error messages and
     /// is the base of relative file names.
     pub fn load_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene> {
-        Scene::from_description(&xml::parse_str(text, path, defines)?)
+        Scene::from_description(&parse_str(text, path, defines)?)
     }
 
     /// Sensor `i`, or an error naming how many there are.
