@@ -18,6 +18,7 @@ mod mask;
 pub mod microfacet;
 mod null;
 mod plastic;
+mod principled;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -33,6 +34,7 @@ pub use diffuse::{Diffuse, DiffuseContext};
 pub use mask::{Mask, MaskContext};
 pub use null::{Null, NullContext};
 pub use plastic::{Plastic, PlasticContext};
+pub use principled::{Ior, Principled, PrincipledContext};
 pub use roughconductor::{RoughConductor, RoughConductorContext};
 pub use roughdielectric::{RoughDielectric, RoughDielectricContext};
 pub use roughplastic::{RoughPlastic, RoughPlasticContext};
@@ -170,6 +172,7 @@ pub enum NodeContext<'a, R: Real> {
     RoughDielectric(RoughDielectricContext<R>),
     Plastic(PlasticContext<'a, R>),
     RoughPlastic(RoughPlasticContext<'a, R>),
+    Principled(PrincipledContext<'a, R>),
     TwoSided(TwoSidedContext),
     Null(NullContext<R>),
     BlendBsdf(BlendBsdfContext<R>),
@@ -269,6 +272,7 @@ macro_rules! dispatch_context {
             NodeContext::RoughDielectric(c) => c.$method($($arg),*),
             NodeContext::Plastic(c) => c.$method($($arg),*),
             NodeContext::RoughPlastic(c) => c.$method($($arg),*),
+            NodeContext::Principled(c) => c.$method($($arg),*),
             NodeContext::Null(c) => c.$method($($arg),*),
             NodeContext::TwoSided(c) => c.$method($this, $($arg),*),
             NodeContext::BlendBsdf(c) => c.$method($this, $($arg),*),
@@ -307,6 +311,7 @@ pub enum Bsdf {
     RoughDielectric(RoughDielectric),
     Plastic(Plastic),
     RoughPlastic(RoughPlastic),
+    Principled(Principled),
     TwoSided(TwoSided),
     Null(Null),
     BlendBsdf(BlendBsdf),
@@ -323,6 +328,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "principled",
     "twosided",
     "null",
     "blendbsdf",
@@ -340,6 +346,7 @@ macro_rules! dispatch {
             Bsdf::RoughDielectric($b) => $e,
             Bsdf::Plastic($b) => $e,
             Bsdf::RoughPlastic($b) => $e,
+            Bsdf::Principled($b) => $e,
             Bsdf::TwoSided($b) => $e,
             Bsdf::Null($b) => $e,
             Bsdf::BlendBsdf($b) => $e,
@@ -384,6 +391,7 @@ impl Bsdf {
             "roughdielectric" => Bsdf::RoughDielectric(RoughDielectric::from_node(node, ctx)?),
             "plastic" => Bsdf::Plastic(Plastic::from_node(node, ctx)?),
             "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::from_node(node, ctx)?),
+            "principled" => Bsdf::Principled(Principled::from_node(node, ctx)?),
             "twosided" => Bsdf::TwoSided(TwoSided::from_node(node, ctx)?),
             "null" => Bsdf::Null(Null::from_node(node, ctx)?),
             "blendbsdf" => Bsdf::BlendBsdf(BlendBsdf::from_node(node, ctx)?),
@@ -748,6 +756,15 @@ mod tests {
             ("roughdielectric", vec![("alpha", float(0.3))]),
             ("plastic", vec![]),
             ("roughplastic", vec![("distribution", string("ggx"))]),
+            (
+                "principled",
+                vec![
+                    ("metallic", float(0.3)),
+                    ("spec_trans", float(0.4)),
+                    ("clearcoat", float(0.5)),
+                    ("sheen", float(0.6)),
+                ],
+            ),
             ("null", vec![]),
             (
                 "twosided",
