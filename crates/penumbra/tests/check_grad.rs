@@ -2,7 +2,7 @@
 //! mode (path replay), for every kind of differentiable parameter: diffuse
 //! reflectance, bitmap texels, roughness, conductor η and k, specular
 //! reflectance, area / constant / envmap / point emission, and every
-//! parameter of the principled BSDF.
+//! parameter of the principled and thin principled BSDFs.
 //!
 //! Forward and reverse mode differentiate the very same estimate, so they
 //! must agree to rounding. Finite differences are an independent estimate
@@ -99,8 +99,9 @@ fn envmap_scene() -> Scene {
     Scene::load_str(&xml, Path::new("envmap.xml"), &[]).unwrap()
 }
 
-/// Two principled spheres: one with every reflection lobe, one
-/// transmitting, in the surfaces scene's light.
+/// Two principled spheres (one with every reflection lobe, one
+/// transmitting) and a thin principled sheet behind them, in the surfaces
+/// scene's light.
 fn principled_scene() -> Scene {
     let xml = format!(
         r#"{HEADER}
@@ -133,6 +134,21 @@ fn principled_scene() -> Scene {
             <float name="roughness" value="0.3"/>
             <float name="spec_trans" value="0.7"/>
             <float name="eta" value="1.45"/>
+        </bsdf>
+    </shape>
+    <shape type="rectangle" id="sheet">
+        <transform name="to_world"><scale x="0.6" y="0.4"/><translate y="0.5" z="-0.9"/></transform>
+        <bsdf type="principledthin" id="thin">
+            <rgb name="base_color" value="0.9, 0.6, 0.3"/>
+            <float name="roughness" value="0.35"/>
+            <float name="anisotropic" value="0.4"/>
+            <float name="spec_trans" value="0.4"/>
+            <float name="diff_trans" value="0.8"/>
+            <float name="eta" value="1.4"/>
+            <float name="spec_tint" value="0.5"/>
+            <float name="sheen" value="0.6"/>
+            <float name="sheen_tint" value="0.5"/>
+            <float name="flatness" value="0.3"/>
         </bsdf>
     </shape>
     <shape type="rectangle" id="light">
@@ -217,6 +233,16 @@ fn principled_parameters() {
         "lobes.flatness.value",
         "clear.spec_trans.value",
         "clear.eta",
+        "thin.base_color.value",
+        "thin.roughness.value",
+        "thin.anisotropic.value",
+        "thin.spec_trans.value",
+        "thin.diff_trans.value",
+        "thin.eta.value",
+        "thin.spec_tint.value",
+        "thin.sheen.value",
+        "thin.sheen_tint.value",
+        "thin.flatness.value",
     ] {
         check(&mut scene, key);
     }

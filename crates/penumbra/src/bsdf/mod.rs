@@ -19,6 +19,7 @@ pub mod microfacet;
 mod null;
 mod plastic;
 mod principled;
+mod principledthin;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -35,6 +36,7 @@ pub use mask::{Mask, MaskContext};
 pub use null::{Null, NullContext};
 pub use plastic::{Plastic, PlasticContext};
 pub use principled::{Ior, Principled, PrincipledContext};
+pub use principledthin::{PrincipledThin, PrincipledThinContext};
 pub use roughconductor::{RoughConductor, RoughConductorContext};
 pub use roughdielectric::{RoughDielectric, RoughDielectricContext};
 pub use roughplastic::{RoughPlastic, RoughPlasticContext};
@@ -65,10 +67,12 @@ impl BsdfFlags {
     pub const NULL: BsdfFlags = BsdfFlags(32);
     /// Both sides of the surface reflect (twosided wrapper, thin dielectric).
     pub const TWO_SIDED: BsdfFlags = BsdfFlags(64);
+    /// Lambertian transmission (the thin principled BSDF).
+    pub const DIFFUSE_TRANSMISSION: BsdfFlags = BsdfFlags(128);
 
     pub const DELTA: BsdfFlags = BsdfFlags(4 | 16 | 32);
-    pub const SMOOTH: BsdfFlags = BsdfFlags(1 | 2 | 8);
-    pub const TRANSMISSION: BsdfFlags = BsdfFlags(8 | 16 | 32);
+    pub const SMOOTH: BsdfFlags = BsdfFlags(1 | 2 | 8 | 128);
+    pub const TRANSMISSION: BsdfFlags = BsdfFlags(8 | 16 | 32 | 128);
 
     #[inline(always)]
     pub fn has(self, f: BsdfFlags) -> bool {
@@ -173,6 +177,7 @@ pub enum NodeContext<'a, R: Real> {
     Plastic(PlasticContext<'a, R>),
     RoughPlastic(RoughPlasticContext<'a, R>),
     Principled(PrincipledContext<'a, R>),
+    PrincipledThin(PrincipledThinContext<'a, R>),
     TwoSided(TwoSidedContext),
     Null(NullContext<R>),
     BlendBsdf(BlendBsdfContext<R>),
@@ -273,6 +278,7 @@ macro_rules! dispatch_context {
             NodeContext::Plastic(c) => c.$method($($arg),*),
             NodeContext::RoughPlastic(c) => c.$method($($arg),*),
             NodeContext::Principled(c) => c.$method($($arg),*),
+            NodeContext::PrincipledThin(c) => c.$method($($arg),*),
             NodeContext::Null(c) => c.$method($($arg),*),
             NodeContext::TwoSided(c) => c.$method($this, $($arg),*),
             NodeContext::BlendBsdf(c) => c.$method($this, $($arg),*),
@@ -312,6 +318,7 @@ pub enum Bsdf {
     Plastic(Plastic),
     RoughPlastic(RoughPlastic),
     Principled(Principled),
+    PrincipledThin(PrincipledThin),
     TwoSided(TwoSided),
     Null(Null),
     BlendBsdf(BlendBsdf),
@@ -329,6 +336,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "plastic",
     "roughplastic",
     "principled",
+    "principledthin",
     "twosided",
     "null",
     "blendbsdf",
@@ -347,6 +355,7 @@ macro_rules! dispatch {
             Bsdf::Plastic($b) => $e,
             Bsdf::RoughPlastic($b) => $e,
             Bsdf::Principled($b) => $e,
+            Bsdf::PrincipledThin($b) => $e,
             Bsdf::TwoSided($b) => $e,
             Bsdf::Null($b) => $e,
             Bsdf::BlendBsdf($b) => $e,
@@ -392,6 +401,7 @@ impl Bsdf {
             "plastic" => Bsdf::Plastic(Plastic::from_node(node, ctx)?),
             "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::from_node(node, ctx)?),
             "principled" => Bsdf::Principled(Principled::from_node(node, ctx)?),
+            "principledthin" => Bsdf::PrincipledThin(PrincipledThin::from_node(node, ctx)?),
             "twosided" => Bsdf::TwoSided(TwoSided::from_node(node, ctx)?),
             "null" => Bsdf::Null(Null::from_node(node, ctx)?),
             "blendbsdf" => Bsdf::BlendBsdf(BlendBsdf::from_node(node, ctx)?),
@@ -764,6 +774,10 @@ mod tests {
                     ("clearcoat", float(0.5)),
                     ("sheen", float(0.6)),
                 ],
+            ),
+            (
+                "principledthin",
+                vec![("spec_trans", float(0.4)), ("diff_trans", float(0.8))],
             ),
             ("null", vec![]),
             (

@@ -83,7 +83,7 @@ pub struct Principled {
 
 /// Whether parameter `name` is given and not the float 0 (Mitsuba's test
 /// for the lobes a principled BSDF has).
-fn given_nonzero(node: &Node, name: &str) -> bool {
+pub(super) fn given_nonzero(node: &Node, name: &str) -> bool {
     node.props
         .iter()
         .find(|p| p.name == name)
@@ -250,7 +250,7 @@ impl BsdfT for Principled {
 /// GGX roughness (αu, αv) of the main lobe from Burley 2012's
 /// parameters: α = roughness², stretched by aspect = √(1 − 0.9
 /// anisotropic), at least 0.001.
-fn main_roughness<R: Real>(roughness: R, anisotropic: R) -> (R, R) {
+pub(super) fn main_roughness<R: Real>(roughness: R, anisotropic: R) -> (R, R) {
     let a = roughness * roughness;
     let aspect = (-(anisotropic * 0.9) + 1.0).sqrt();
     let floor = R::cst(1e-3);
@@ -268,7 +268,7 @@ fn schlick_weight<R: Real>(cos: R) -> R {
 /// interface of relative index `eta` at the microfacet cosine `cos_i`
 /// (Schlick 1994); where the light comes from the denser side, w uses the
 /// cosine of the refracted direction (0 under total internal reflection).
-fn schlick_fresnel<R: Real>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spectrum<R> {
+pub(super) fn schlick_fresnel<R: Real>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spectrum<R> {
     let eta_it = if cos_i.val() >= 0.0 { eta } else { eta.recip() };
     let w = if eta_it.val() > 1.0 {
         schlick_weight(cos_i.abs())
@@ -281,12 +281,12 @@ fn schlick_fresnel<R: Real>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spectrum<R> {
 }
 
 /// Schlick's normal-incidence reflectance ((η − 1) / (η + 1))².
-fn schlick_f0<R: Real>(eta: R) -> R {
+pub(super) fn schlick_f0<R: Real>(eta: R) -> R {
     ((eta - 1.0) / (eta + 1.0)).sqr()
 }
 
 /// `base_color / luminance` (its hue at unit luminance), white for black.
-fn tint<R: Real>(base_color: Spectrum<R>) -> Spectrum<R> {
+pub(super) fn tint<R: Real>(base_color: Spectrum<R>) -> Spectrum<R> {
     let lum = base_color.luminance();
     if lum.val() > 0.0 {
         base_color / lum
@@ -476,26 +476,37 @@ impl<R: Real> PrincipledContext<'_, R> {
     /// reflection), times |cos θo|.
     fn diffuse_and_sheen(&self, wo: V3<R>, wh: V3<R>, brdf: R) -> Spectrum<R> {
         let (cos_i, cos_o) = (self.wi.z.abs(), wo.z.abs());
-        let (f_i, f_o) = (schlick_weight(cos_i), schlick_weight(cos_o));
-        let f_diff = (-(f_i * 0.5) + 1.0) * (-(f_o * 0.5) + 1.0);
         let cos_d = wh.dot(wo);
-        let rr = self.roughness * cos_d * cos_d * 2.0;
-        let f_retro = rr * (f_o + f_i + f_o * f_i * (rr - 1.0));
-        // Hanrahan-Krueger-like subsurface approximation (Burley 2012)
-        let f_ss90 = rr * 0.5;
-        let f_ss = (f_ss90 - 1.0) * f_o + 1.0;
-        let f_ss = f_ss * ((f_ss90 - 1.0) * f_i + 1.0);
-        let f_ss = (f_ss * ((cos_o + cos_i).recip() - 0.5) + 0.5) * 1.25;
-        let lobe = f_diff + f_retro;
-        let lobe = lobe + (f_ss - lobe) * self.flatness;
+        let lobe = diffuse_lobe(self.roughness, self.flatness, cos_i, cos_o, cos_d);
         let diffuse = self.base_color * (brdf * cos_o * lobe * FRAC_1_PI);
-        // sheen: Schlick weight of the half angle, tinted towards the hue
-        let c_sheen = (tint(self.base_color) - V3::splat(R::cst(1.0))) * self.sheen_tint;
-        let c_sheen = c_sheen + V3::splat(R::cst(1.0));
-        let sheen =
-            c_sheen * (self.sheen * (-self.metallic + 1.0) * schlick_weight(cos_d.abs()) * cos_o);
-        diffuse + sheen
+        let sheen = sheen_lobe(self.base_color, self.sheen_tint, cos_d);
+        diffuse + sheen * (self.sheen * (-self.metallic + 1.0) * cos_o)
     }
+}
+
+/// Burley 2012's diffuse lobe with retro-reflection, blended by
+/// `flatness` towards his Hanrahan-Krueger-like subsurface approximation,
+/// without the albedo / π and the cosine: a function of the cosines of
+/// `wi`, `wo` (to the normal, positive) and of the half angle `cos_d`.
+pub(super) fn diffuse_lobe<R: Real>(roughness: R, flatness: R, cos_i: R, cos_o: R, cos_d: R) -> R {
+    let (f_i, f_o) = (schlick_weight(cos_i), schlick_weight(cos_o));
+    let f_diff = (-(f_i * 0.5) + 1.0) * (-(f_o * 0.5) + 1.0);
+    let rr = roughness * cos_d * cos_d * 2.0;
+    let f_retro = rr * (f_o + f_i + f_o * f_i * (rr - 1.0));
+    let f_ss90 = rr * 0.5;
+    let f_ss = ((f_ss90 - 1.0) * f_o + 1.0) * ((f_ss90 - 1.0) * f_i + 1.0);
+    let f_ss = (f_ss * ((cos_o + cos_i).recip() - 0.5) + 0.5) * 1.25;
+    let lobe = f_diff + f_retro;
+    lobe + (f_ss - lobe) * flatness
+}
+
+/// Burley 2012's sheen, without its weight and cosine: the Schlick
+/// weight of the half angle, tinted towards the hue of `base_color` by
+/// `sheen_tint`.
+pub(super) fn sheen_lobe<R: Real>(base_color: Spectrum<R>, sheen_tint: R, cos_d: R) -> Spectrum<R> {
+    let white = V3::splat(R::cst(1.0));
+    let color = white + (tint(base_color) - white) * sheen_tint;
+    color * schlick_weight(cos_d.abs())
 }
 
 impl<R: Real> BsdfContextT<R> for PrincipledContext<'_, R> {
