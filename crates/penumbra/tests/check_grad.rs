@@ -1,7 +1,8 @@
 //! Finite differences (identical random numbers) vs forward mode vs reverse
 //! mode (path replay), for every kind of differentiable parameter: diffuse
 //! reflectance, bitmap texels, roughness, conductor η and k, specular
-//! reflectance, area / constant / envmap / point emission.
+//! reflectance, area / constant / envmap / point emission, and every
+//! parameter of the principled and thin principled BSDFs.
 //!
 //! Forward and reverse mode differentiate the very same estimate, so they
 //! must agree to rounding. Finite differences are an independent estimate
@@ -98,6 +99,68 @@ fn envmap_scene() -> Scene {
     Scene::load_str(&xml, Path::new("envmap.xml"), &[]).unwrap()
 }
 
+/// Two principled spheres (one with every reflection lobe, one
+/// transmitting) and a thin principled sheet behind them, in the surfaces
+/// scene's light.
+fn principled_scene() -> Scene {
+    let xml = format!(
+        r#"{HEADER}
+    <shape type="rectangle" id="floor">
+        <transform name="to_world"><scale value="2"/><rotate x="1" angle="-90"/></transform>
+        <bsdf type="diffuse"/>
+    </shape>
+    <shape type="sphere" id="ball">
+        <point name="center" x="-0.6" y="0.5" z="0"/>
+        <float name="radius" value="0.5"/>
+        <bsdf type="principled" id="lobes">
+            <rgb name="base_color" value="0.8, 0.4, 0.2"/>
+            <float name="roughness" value="0.4"/>
+            <float name="metallic" value="0.3"/>
+            <float name="specular" value="0.6"/>
+            <float name="spec_tint" value="0.5"/>
+            <float name="anisotropic" value="0.5"/>
+            <float name="sheen" value="0.7"/>
+            <float name="sheen_tint" value="0.4"/>
+            <float name="clearcoat" value="0.6"/>
+            <float name="clearcoat_gloss" value="0.3"/>
+            <float name="flatness" value="0.3"/>
+        </bsdf>
+    </shape>
+    <shape type="sphere" id="glass">
+        <point name="center" x="0.7" y="0.4" z="0.3"/>
+        <float name="radius" value="0.4"/>
+        <bsdf type="principled" id="clear">
+            <rgb name="base_color" value="0.6, 0.8, 0.9"/>
+            <float name="roughness" value="0.3"/>
+            <float name="spec_trans" value="0.7"/>
+            <float name="eta" value="1.45"/>
+        </bsdf>
+    </shape>
+    <shape type="rectangle" id="sheet">
+        <transform name="to_world"><scale x="0.6" y="0.4"/><translate y="0.5" z="-0.9"/></transform>
+        <bsdf type="principledthin" id="thin">
+            <rgb name="base_color" value="0.9, 0.6, 0.3"/>
+            <float name="roughness" value="0.35"/>
+            <float name="anisotropic" value="0.4"/>
+            <float name="spec_trans" value="0.4"/>
+            <float name="diff_trans" value="0.8"/>
+            <float name="eta" value="1.4"/>
+            <float name="spec_tint" value="0.5"/>
+            <float name="sheen" value="0.6"/>
+            <float name="sheen_tint" value="0.5"/>
+            <float name="flatness" value="0.3"/>
+        </bsdf>
+    </shape>
+    <shape type="rectangle" id="light">
+        <transform name="to_world"><scale value="0.5"/><lookat origin="1, 3, 1" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <emitter type="area"><rgb name="radiance" value="10, 9, 8"/></emitter>
+    </shape>
+    <emitter type="constant" id="sky"><rgb name="radiance" value="0.3, 0.35, 0.4"/></emitter>
+</scene>"#
+    );
+    Scene::load_str(&xml, Path::new("principled.xml"), &[]).unwrap()
+}
+
 fn check(scene: &mut Scene, key: &str) -> CheckReport {
     let opts = CheckOptions {
         spp: 4,
@@ -151,4 +214,36 @@ fn surface_and_emitter_parameters() {
 fn envmap_texels() {
     let mut scene = envmap_scene();
     check(&mut scene, "sky.data");
+}
+
+#[test]
+fn principled_parameters() {
+    let mut scene = principled_scene();
+    for key in [
+        "lobes.base_color.value",
+        "lobes.roughness.value",
+        "lobes.metallic.value",
+        "lobes.specular",
+        "lobes.spec_tint.value",
+        "lobes.anisotropic.value",
+        "lobes.sheen.value",
+        "lobes.sheen_tint.value",
+        "lobes.clearcoat.value",
+        "lobes.clearcoat_gloss.value",
+        "lobes.flatness.value",
+        "clear.spec_trans.value",
+        "clear.eta",
+        "thin.base_color.value",
+        "thin.roughness.value",
+        "thin.anisotropic.value",
+        "thin.spec_trans.value",
+        "thin.diff_trans.value",
+        "thin.eta.value",
+        "thin.spec_tint.value",
+        "thin.sheen.value",
+        "thin.sheen_tint.value",
+        "thin.flatness.value",
+    ] {
+        check(&mut scene, key);
+    }
 }

@@ -18,6 +18,8 @@ mod mask;
 pub mod microfacet;
 mod null;
 mod plastic;
+mod principled;
+mod principledthin;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -33,6 +35,8 @@ pub use diffuse::{Diffuse, DiffuseContext};
 pub use mask::{Mask, MaskContext};
 pub use null::{Null, NullContext};
 pub use plastic::{Plastic, PlasticContext};
+pub use principled::{Ior, Principled, PrincipledContext};
+pub use principledthin::{PrincipledThin, PrincipledThinContext};
 pub use roughconductor::{RoughConductor, RoughConductorContext};
 pub use roughdielectric::{RoughDielectric, RoughDielectricContext};
 pub use roughplastic::{RoughPlastic, RoughPlasticContext};
@@ -63,10 +67,12 @@ impl BsdfFlags {
     pub const NULL: BsdfFlags = BsdfFlags(32);
     /// Both sides of the surface reflect (twosided wrapper, thin dielectric).
     pub const TWO_SIDED: BsdfFlags = BsdfFlags(64);
+    /// Lambertian transmission (the thin principled BSDF).
+    pub const DIFFUSE_TRANSMISSION: BsdfFlags = BsdfFlags(128);
 
     pub const DELTA: BsdfFlags = BsdfFlags(4 | 16 | 32);
-    pub const SMOOTH: BsdfFlags = BsdfFlags(1 | 2 | 8);
-    pub const TRANSMISSION: BsdfFlags = BsdfFlags(8 | 16 | 32);
+    pub const SMOOTH: BsdfFlags = BsdfFlags(1 | 2 | 8 | 128);
+    pub const TRANSMISSION: BsdfFlags = BsdfFlags(8 | 16 | 32 | 128);
 
     #[inline(always)]
     pub fn has(self, f: BsdfFlags) -> bool {
@@ -170,6 +176,8 @@ pub enum NodeContext<'a, R: Real> {
     RoughDielectric(RoughDielectricContext<R>),
     Plastic(PlasticContext<'a, R>),
     RoughPlastic(RoughPlasticContext<'a, R>),
+    Principled(PrincipledContext<'a, R>),
+    PrincipledThin(PrincipledThinContext<'a, R>),
     TwoSided(TwoSidedContext),
     Null(NullContext<R>),
     BlendBsdf(BlendBsdfContext<R>),
@@ -269,6 +277,8 @@ macro_rules! dispatch_context {
             NodeContext::RoughDielectric(c) => c.$method($($arg),*),
             NodeContext::Plastic(c) => c.$method($($arg),*),
             NodeContext::RoughPlastic(c) => c.$method($($arg),*),
+            NodeContext::Principled(c) => c.$method($($arg),*),
+            NodeContext::PrincipledThin(c) => c.$method($($arg),*),
             NodeContext::Null(c) => c.$method($($arg),*),
             NodeContext::TwoSided(c) => c.$method($this, $($arg),*),
             NodeContext::BlendBsdf(c) => c.$method($this, $($arg),*),
@@ -307,6 +317,8 @@ pub enum Bsdf {
     RoughDielectric(RoughDielectric),
     Plastic(Plastic),
     RoughPlastic(RoughPlastic),
+    Principled(Principled),
+    PrincipledThin(PrincipledThin),
     TwoSided(TwoSided),
     Null(Null),
     BlendBsdf(BlendBsdf),
@@ -323,6 +335,8 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "principled",
+    "principledthin",
     "twosided",
     "null",
     "blendbsdf",
@@ -340,6 +354,8 @@ macro_rules! dispatch {
             Bsdf::RoughDielectric($b) => $e,
             Bsdf::Plastic($b) => $e,
             Bsdf::RoughPlastic($b) => $e,
+            Bsdf::Principled($b) => $e,
+            Bsdf::PrincipledThin($b) => $e,
             Bsdf::TwoSided($b) => $e,
             Bsdf::Null($b) => $e,
             Bsdf::BlendBsdf($b) => $e,
@@ -384,6 +400,8 @@ impl Bsdf {
             "roughdielectric" => Bsdf::RoughDielectric(RoughDielectric::from_node(node, ctx)?),
             "plastic" => Bsdf::Plastic(Plastic::from_node(node, ctx)?),
             "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::from_node(node, ctx)?),
+            "principled" => Bsdf::Principled(Principled::from_node(node, ctx)?),
+            "principledthin" => Bsdf::PrincipledThin(PrincipledThin::from_node(node, ctx)?),
             "twosided" => Bsdf::TwoSided(TwoSided::from_node(node, ctx)?),
             "null" => Bsdf::Null(Null::from_node(node, ctx)?),
             "blendbsdf" => Bsdf::BlendBsdf(BlendBsdf::from_node(node, ctx)?),
@@ -748,6 +766,19 @@ mod tests {
             ("roughdielectric", vec![("alpha", float(0.3))]),
             ("plastic", vec![]),
             ("roughplastic", vec![("distribution", string("ggx"))]),
+            (
+                "principled",
+                vec![
+                    ("metallic", float(0.3)),
+                    ("spec_trans", float(0.4)),
+                    ("clearcoat", float(0.5)),
+                    ("sheen", float(0.6)),
+                ],
+            ),
+            (
+                "principledthin",
+                vec![("spec_trans", float(0.4)), ("diff_trans", float(0.8))],
+            ),
             ("null", vec![]),
             (
                 "twosided",
