@@ -247,7 +247,7 @@ mod tests {
         assert!(
             e.contains("s.xml:3")
                 && e.contains("'torus'")
-                && e.contains("ply, obj, rectangle, cube, sphere, disk"),
+                && e.contains("ply, obj, serialized, rectangle, cube, sphere, disk"),
             "{e}"
         );
     }

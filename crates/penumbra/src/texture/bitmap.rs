@@ -98,8 +98,19 @@ impl Bitmap {
     /// Builds a bitmap from its node: `filename`, `filter_type`
     /// (bilinear | nearest), `wrap_mode` (repeat | mirror | clamp), `raw`
     /// (default false: PNG/JPEG data is sRGB-decoded to linear at load;
-    /// EXR data is linear and used as is), `to_uv`. `domain`: that of the
-    /// slot the bitmap fills (see [`Bitmap::new`]).
+    /// EXR data is linear and used as is), `to_uv`, and Mitsuba 3's
+    /// storage options:
+    /// - `format` (auto | variant | float16 | fp16 | uint8): `float16` and
+    ///   `fp16` round the linear texels to half precision, as Mitsuba
+    ///   stores them; the others keep f32, which renders as Mitsuba's
+    ///   `variant` and 8-bit storage do (Mitsuba linearises 8-bit texels
+    ///   before interpolating them too). Unlike Mitsuba's `uint8`, the
+    ///   data stays differentiable; and `auto` does not round 16-bit
+    ///   images to half precision.
+    /// - `accel` (true): CUDA hardware interpolation in Mitsuba; no
+    ///   effect on the CPU, in Mitsuba's LLVM variants as here.
+    ///
+    /// `domain`: that of the slot the bitmap fills (see [`Bitmap::new`]).
     pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Bitmap> {
         let filename = node
             .string_opt("filename")?
@@ -121,6 +132,12 @@ impl Bitmap {
             _ => WrapMode::Repeat,
         };
         let raw = node.bool("raw", false)?;
+        let half_precision = matches!(
+            node.choice("format", &["auto", "variant", "float16", "fp16", "uint8"])?
+                .as_str(),
+            "float16" | "fp16"
+        );
+        node.bool("accel", true)?;
         let img = read_image(&path).map_err(|e| node.error(e))?;
         let channels = if img.channels >= 3 { 3 } else { 1 };
         let mut img = img.take_channels(channels);
@@ -131,6 +148,11 @@ impl Bitmap {
         if !is_exr && !raw {
             for v in img.data.iter_mut() {
                 *v = srgb_to_linear(*v);
+            }
+        }
+        if half_precision {
+            for v in img.data.iter_mut() {
+                *v = half::f16::from_f32(*v).to_f32();
             }
         }
         let to_uv = node.transform("to_uv")?;
@@ -497,6 +519,50 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("unknown parameter 'filtertype'"), "{e}");
+    }
+
+    /// `format` (Mitsuba's storage precision) and `accel` (CUDA only) are
+    /// accepted: float16/fp16 round the linear texels to half precision,
+    /// the other formats keep them as they are.
+    #[test]
+    fn storage_format_and_accel() {
+        let dir = std::env::temp_dir().join(format!("penumbra-format-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.png");
+        write_png8(&p, &[128, 64, 255], 1, 1);
+        let file = Value::Str(p.to_str().unwrap().into());
+        let load = |format: &str| {
+            let node = test_node(
+                Class::Texture,
+                "bitmap",
+                "tex",
+                vec![
+                    ("filename", file.clone()),
+                    ("format", Value::Str(format.into())),
+                    ("accel", Value::Bool(false)),
+                ],
+            );
+            let mut ctx = LoadContext::default();
+            Texture::from_node(&node, Domain::Finite, &mut ctx).map(|t| {
+                t.eval::<f32>(&ctx.store.primal(), &si_at_uv(0.5, 0.5))
+                    .val()
+            })
+        };
+        let linear = Vec3::new(0.215_861, 0.051_269, 1.0);
+        for format in ["auto", "variant", "uint8"] {
+            assert!(close(load(format).unwrap(), linear), "{format}");
+        }
+        for format in ["float16", "fp16"] {
+            let got = load(format).unwrap();
+            // the nearest halves: 0.2158203 (10-bit mantissa), 0.05126953
+            assert_eq!(got, Vec3::new(0.215_820_31, 0.051_269_53, 1.0), "{format}");
+        }
+        let e = load("fp32").unwrap_err().to_string();
+        assert!(
+            e.contains("'fp32' is not one of: auto, variant, float16, fp16, uint8"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
