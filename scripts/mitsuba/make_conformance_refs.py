@@ -23,9 +23,29 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 DIR = os.path.join(ROOT, 'scenes', 'conformance')
 PASS_SPP = 256
 
+# Scenes whose reference Mitsuba renders with another sampler, because its
+# own render with the scene's sampler is biased. Mitsuba 3.9.1's ldsampler
+# on sampler_ldsampler.xml: image quadrant means 0.1 % off (about 7
+# standard errors) from its independent, multijitter and orthogonal renders
+# of the same scene, which agree with each other to 1e-4. A sampler changes
+# the noise, never the expected image, so another unbiased sampler's render
+# is the reference: multijitter, whose noise at 4096 spp stays below what
+# the test assumes of the reference (independent sampling's would not).
+REFERENCE_SAMPLER = {'sampler_ldsampler': ('ldsampler', 'multijitter')}
+
+
+def load_scene(path):
+    name = os.path.splitext(os.path.basename(path))[0]
+    if name not in REFERENCE_SAMPLER:
+        return mi.load_file(path)
+    theirs, ours = REFERENCE_SAMPLER[name]
+    with open(path) as f:
+        text = f.read().replace(f'type="{theirs}"', f'type="{ours}"')
+    return mi.load_string(text)
+
 
 def render_reference(path, spp):
-    scene = mi.load_file(path)
+    scene = load_scene(path)
     acc = None
     for seed in range(max(spp // PASS_SPP, 1)):
         img = np.array(mi.render(scene, spp=min(spp, PASS_SPP), seed=seed), dtype=np.float64)

@@ -363,7 +363,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     output.display(),
                     image.width,
                     image.height,
-                    spp.unwrap_or_else(|| scene.sensors[0].sampler.sample_count()),
+                    scene.sensors[0].sampler.pass_count(spp),
                     t_load.as_secs_f64(),
                     t_render.as_secs_f64()
                 );
@@ -713,7 +713,7 @@ fn run(cli: Cli) -> Result<(), String> {
             println!(
                 "{{\"scene\": \"{}\", \"spp\": {}, \"load_s\": {load_s:.4}, \"first_s\": {:.4}, \"warm_median_s\": {median:.4}, \"peak_rss_mb\": {:.1}}}",
                 scene_args.scene.display(),
-                spp.unwrap_or_else(|| loaded.sensors[0].sampler.sample_count()),
+                loaded.sensors[0].sampler.pass_count(spp),
                 times[0],
                 peak_rss_mb()
             );

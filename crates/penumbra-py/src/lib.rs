@@ -242,6 +242,9 @@ impl PyIntegrator {
             ),
             Integrator::Direct(_) => "Integrator(direct)".into(),
             Integrator::Aov(a) => format!("Integrator(aov, channels={:?})", a.channel_names()),
+            Integrator::Moment(m) => {
+                format!("Integrator(moment, channels={:?})", m.channel_names())
+            }
         }
     }
 }

@@ -12,8 +12,8 @@ use super::{
     BoundaryTerms,
 };
 use crate::ad::Dual;
-use crate::error::{Error, Result};
-use crate::integrator::{render::render_samples, Integrator, RenderOptions, Rendered};
+use crate::error::Result;
+use crate::integrator::{render::render_samples, RenderOptions, Rendered};
 use crate::params::{ParamView, Seeds};
 use crate::scene::Scene;
 
@@ -53,11 +53,7 @@ pub fn render_forward(
 
 fn derivative_image(scene: &Scene, store: &ParamView, opts: &RenderOptions) -> Result<Rendered> {
     let integrator = &scene.integrator;
-    if let Integrator::Aov(_) = integrator {
-        return Err(Error::Invalid(
-            "the aov integrator has no derivatives; use path or direct".into(),
-        ));
-    }
+    integrator.check_differentiable()?;
     if opts.spp == Some(0) {
         // sppc = 0: the interior term is off
         let (width, height) = scene.sensor(opts.sensor)?.film.crop_size;

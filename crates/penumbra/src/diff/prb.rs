@@ -30,7 +30,7 @@ use crate::ad::Var;
 use crate::error::{Error, Result};
 use crate::image::ImageBlock;
 use crate::integrator::render::{report_non_finite, SampleLayout};
-use crate::integrator::{Integrator, RenderOptions};
+use crate::integrator::RenderOptions;
 use crate::params::{ParamId, ParamView, Seeds};
 use crate::scene::Scene;
 use std::borrow::Cow;
@@ -93,11 +93,7 @@ pub fn render_backward(
     opts: &RenderOptions,
 ) -> Result<Gradients> {
     let opts = &scene.integrator.derivative_options(scene, opts)?;
-    if let Integrator::Aov(_) = scene.integrator {
-        return Err(Error::Invalid(
-            "the aov integrator has no derivatives; use path or direct".into(),
-        ));
-    }
+    scene.integrator.check_differentiable()?;
     let film = &scene.sensor(opts.sensor)?.film;
     let (cw, ch) = film.crop_size;
     let d_image: Cow<[f32]> = if film.alpha && d_image.len() == cw * ch * 4 {

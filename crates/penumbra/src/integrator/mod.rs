@@ -4,12 +4,14 @@
 mod aov;
 mod budgets;
 mod direct;
+mod moment;
 pub(crate) mod path;
 pub(crate) mod render;
 
 pub use aov::{AovIntegrator, AovKind};
 pub use budgets::Budgets;
 pub use direct::DirectIntegrator;
+pub use moment::MomentIntegrator;
 pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 
@@ -35,6 +37,7 @@ pub enum Integrator {
     /// `direct`, `direct_projective`.
     Direct(DirectIntegrator),
     Aov(AovIntegrator),
+    Moment(MomentIntegrator),
 }
 
 impl Integrator {
@@ -54,6 +57,7 @@ impl Integrator {
                 Integrator::Direct(DirectIntegrator::projective_from_node(node)?)
             }
             "aov" => Integrator::Aov(AovIntegrator::from_node(node)?),
+            "moment" => Integrator::Moment(MomentIntegrator::from_node(node)?),
             "volpath" | "volpathmis" | "prbvolpath" => {
                 return Err(node.error(
                     "renders participating media, which are not supported yet; for surfaces, \
@@ -63,7 +67,7 @@ impl Integrator {
             other => {
                 return Err(node.error(format!(
                     "unknown integrator plugin '{other}' (Penumbra has: path, prb, prb_basic, \
-                     prb_projective, direct, direct_projective, aov)"
+                     prb_projective, direct, direct_projective, aov, moment)"
                 )))
             }
         };
@@ -76,7 +80,7 @@ impl Integrator {
         match self {
             Integrator::Path(p) => p.budgets,
             Integrator::Direct(d) => d.budgets,
-            Integrator::Aov(_) => Budgets::default(),
+            Integrator::Aov(_) | Integrator::Moment(_) => Budgets::default(),
         }
     }
 
@@ -95,6 +99,7 @@ impl Integrator {
     pub fn channel_names(&self) -> Vec<String> {
         match self {
             Integrator::Aov(a) => a.channel_names(),
+            Integrator::Moment(m) => m.channel_names(),
             _ => vec!["R".into(), "G".into(), "B".into()],
         }
     }
@@ -102,8 +107,31 @@ impl Integrator {
     pub fn channel_count(&self) -> usize {
         match self {
             Integrator::Aov(a) => a.channel_names().len(),
+            Integrator::Moment(m) => m.channel_count(),
             _ => 3,
         }
+    }
+
+    /// Whether the first three channels are an RGB radiance image (all
+    /// but an `aov` integrator without a nested one).
+    pub fn has_radiance_channels(&self) -> bool {
+        match self {
+            Integrator::Aov(a) => a.nested.is_some(),
+            _ => true,
+        }
+    }
+
+    /// Fails for the integrators that only write images (`aov`,
+    /// `moment`): derivatives need a radiance integrator.
+    pub(crate) fn check_differentiable(&self) -> Result<()> {
+        let name = match self {
+            Integrator::Aov(_) => "aov",
+            Integrator::Moment(_) => "moment",
+            Integrator::Path(_) | Integrator::Direct(_) => return Ok(()),
+        };
+        Err(crate::Error::Invalid(format!(
+            "the {name} integrator has no derivatives; use path or direct"
+        )))
     }
 
     /// Primal estimate along `ray`, written to `out` (`channel_count()`
@@ -115,8 +143,10 @@ impl Integrator {
         rng: &mut SampleStream,
         out: &mut [f32],
     ) {
-        if let Integrator::Aov(a) = self {
-            return a.sample(scene, cs, rng, out);
+        match self {
+            Integrator::Aov(a) => return a.sample(scene, cs, rng, out),
+            Integrator::Moment(m) => return m.sample(scene, cs, rng, out),
+            Integrator::Path(_) | Integrator::Direct(_) => {}
         }
         let rgb = self
             .radiance::<f32>(scene, &scene.params.primal(), cs, rng)
@@ -126,7 +156,7 @@ impl Integrator {
 
     /// The radiance estimate through camera sample `cs` in `R` (primal for
     /// f32, derivatives for dual numbers and recorded variables); `None` for
-    /// the AOV integrator, which estimates no radiance of its own.
+    /// the AOV and moment integrators, which only write images.
     /// Parameters are read through `store`, the scene's values with the
     /// derivative state of the call; when a differentiated parameter moves
     /// surfaces or the camera ([`ParamView::moves_geometry`]) the path is
@@ -142,7 +172,7 @@ impl Integrator {
         match self {
             Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng)),
             Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
-            Integrator::Aov(_) => None,
+            Integrator::Aov(_) | Integrator::Moment(_) => None,
         }
     }
 }
@@ -180,7 +210,7 @@ impl Integrator {
                         .val()
                 }),
             },
-            Integrator::Aov(_) => glam::Vec3::ZERO,
+            Integrator::Aov(_) | Integrator::Moment(_) => glam::Vec3::ZERO,
         }
     }
 

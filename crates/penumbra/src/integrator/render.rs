@@ -159,7 +159,8 @@ impl<'a> SampleLayout<'a> {
     pub fn new(scene: &'a Scene, opts: &RenderOptions) -> Result<SampleLayout<'a>> {
         let sensor = scene.sensor(opts.sensor)?;
         let film = &sensor.film;
-        let spp = opts.spp.unwrap_or_else(|| sensor.sampler.sample_count());
+        // as Mitsuba's render(spp=…), the sampler's pattern decides
+        let spp = sensor.sampler.pass_count(opts.spp);
         if spp == 0 {
             return Err(Error::Invalid("spp must be at least 1".into()));
         }

@@ -3,9 +3,15 @@
 //! any thread, in any order.
 
 mod independent;
+mod ldsampler;
+mod multijitter;
+mod orthogonal;
 mod stratified;
 
 pub use independent::Independent;
+pub use ldsampler::LowDiscrepancy;
+pub use multijitter::Multijitter;
+pub use orthogonal::Orthogonal;
 pub use stratified::Stratified;
 
 use crate::error::Result;
@@ -17,6 +23,9 @@ use glam::Vec2;
 pub enum Sampler {
     Independent(Independent),
     Stratified(Stratified),
+    Multijitter(Multijitter),
+    LowDiscrepancy(LowDiscrepancy),
+    Orthogonal(Orthogonal),
 }
 
 impl Sampler {
@@ -24,9 +33,13 @@ impl Sampler {
         let s = match node.plugin.as_str() {
             "independent" => Sampler::Independent(Independent::from_node(node)?),
             "stratified" => Sampler::Stratified(Stratified::from_node(node)?),
+            "multijitter" => Sampler::Multijitter(Multijitter::from_node(node)?),
+            "ldsampler" => Sampler::LowDiscrepancy(LowDiscrepancy::from_node(node)?),
+            "orthogonal" => Sampler::Orthogonal(Orthogonal::from_node(node)?),
             other => {
                 return Err(node.error(format!(
-                    "unknown sampler plugin '{other}' (Penumbra has: independent, stratified)"
+                    "unknown sampler plugin '{other}' (Penumbra has: independent, stratified, \
+                     multijitter, ldsampler, orthogonal)"
                 )))
             }
         };
@@ -39,6 +52,49 @@ impl Sampler {
         match self {
             Sampler::Independent(s) => s.sample_count,
             Sampler::Stratified(s) => s.sample_count(),
+            Sampler::Multijitter(s) => s.sample_count,
+            Sampler::LowDiscrepancy(s) => s.sample_count,
+            Sampler::Orthogonal(s) => s.sample_count,
+        }
+    }
+
+    /// The sample count this sampler takes when `spp` are asked for: the
+    /// next count its pattern is built for (as Mitsuba's
+    /// `set_sample_count`), with a warning when that differs from `spp`.
+    pub fn round_sample_count(&self, spp: u32) -> u32 {
+        if spp == 0 {
+            return 0;
+        }
+        let n = match self {
+            Sampler::Independent(_) | Sampler::Stratified(_) => spp,
+            Sampler::Multijitter(_) => multijitter::rounded_count(spp),
+            Sampler::LowDiscrepancy(_) => ldsampler::rounded_count(spp),
+            Sampler::Orthogonal(_) => orthogonal::rounded_count(spp),
+        };
+        if n != spp {
+            crate::warn(format!(
+                "{spp} samples per pixel rounded up to {n}, the next count the '{}' \
+                 sampler's pattern is built for",
+                self.plugin_name()
+            ));
+        }
+        n
+    }
+
+    /// Samples per pixel of a render that asks for `spp` (`None`: the
+    /// sampler's own count), rounded as [`Sampler::round_sample_count`].
+    pub fn pass_count(&self, spp: Option<u32>) -> u32 {
+        spp.map_or_else(|| self.sample_count(), |n| self.round_sample_count(n))
+    }
+
+    /// The plugin name, as scene files write it.
+    pub fn plugin_name(&self) -> &'static str {
+        match self {
+            Sampler::Independent(_) => "independent",
+            Sampler::Stratified(_) => "stratified",
+            Sampler::Multijitter(_) => "multijitter",
+            Sampler::LowDiscrepancy(_) => "ldsampler",
+            Sampler::Orthogonal(_) => "orthogonal",
         }
     }
 
@@ -47,17 +103,34 @@ impl Sampler {
         match self {
             Sampler::Independent(s) => s.seed,
             Sampler::Stratified(s) => s.seed,
+            Sampler::Multijitter(s) => s.seed,
+            Sampler::LowDiscrepancy(s) => s.seed,
+            Sampler::Orthogonal(s) => s.seed,
         }
     }
 
-    /// The same sampler with another sample count (CLI `--spp`).
+    /// The same sampler with another sample count (CLI `--spp`), rounded
+    /// as [`Sampler::round_sample_count`] does.
     pub fn with_sample_count(&self, spp: u32) -> Sampler {
+        let n = self.round_sample_count(spp);
         match self {
             Sampler::Independent(s) => Sampler::Independent(Independent {
-                sample_count: spp,
+                sample_count: n,
                 ..s.clone()
             }),
-            Sampler::Stratified(s) => Sampler::Stratified(Stratified::new(spp, s.seed, s.jitter)),
+            Sampler::Stratified(s) => Sampler::Stratified(Stratified::new(n, s.seed, s.jitter)),
+            Sampler::Multijitter(s) => Sampler::Multijitter(Multijitter {
+                sample_count: n,
+                ..s.clone()
+            }),
+            Sampler::LowDiscrepancy(s) => Sampler::LowDiscrepancy(LowDiscrepancy {
+                sample_count: n,
+                ..s.clone()
+            }),
+            Sampler::Orthogonal(s) => Sampler::Orthogonal(Orthogonal {
+                sample_count: n,
+                ..s.clone()
+            }),
         }
     }
 
@@ -71,11 +144,35 @@ impl Sampler {
             index,
             spp,
             dim: 0,
-            strata: match self {
-                Sampler::Independent(_) => None,
-                Sampler::Stratified(s) => Some(s.jitter),
+            pattern: match self {
+                Sampler::Independent(_) => Pattern::Independent,
+                Sampler::Stratified(s) => Pattern::Stratified { jitter: s.jitter },
+                Sampler::Multijitter(s) => Pattern::Multijitter { jitter: s.jitter },
+                Sampler::LowDiscrepancy(_) => Pattern::LowDiscrepancy,
+                Sampler::Orthogonal(s) => Pattern::Orthogonal { jitter: s.jitter },
             },
         }
+    }
+}
+
+/// How a stream places its samples (the sampler's kind and options).
+#[derive(Clone, Copy, Debug)]
+enum Pattern {
+    Independent,
+    Stratified { jitter: bool },
+    Multijitter { jitter: bool },
+    LowDiscrepancy,
+    Orthogonal { jitter: bool },
+}
+
+/// Warns, at the place of `node`, that its `sample_count` was rounded up
+/// to the count its pattern needs (`what`), as Mitsuba warns.
+fn round_up_warning(node: &Node, requested: u32, rounded: u32, what: &str) {
+    if requested != rounded {
+        crate::warn(format!(
+            "{}: {node}: sample_count {requested} rounded up to {rounded} ({what})",
+            node.loc
+        ));
     }
 }
 
@@ -87,8 +184,7 @@ pub struct SampleStream {
     index: u32,
     spp: u32,
     dim: u32,
-    /// `Some(jitter)` for stratified sampling.
-    strata: Option<bool>,
+    pattern: Pattern,
 }
 
 impl SampleStream {
@@ -97,9 +193,13 @@ impl SampleStream {
     pub fn next_1d(&mut self) -> f32 {
         let d = self.dim;
         self.dim += 1;
-        match self.strata {
-            None => independent::uniform(self.key, self.index, d),
-            Some(jitter) => stratified::sample_1d(self.key, self.index, self.spp, d, jitter),
+        let (key, index, spp) = (self.key, self.index, self.spp);
+        match self.pattern {
+            Pattern::Independent => independent::uniform(key, index, d),
+            Pattern::Stratified { jitter } => stratified::sample_1d(key, index, spp, d, jitter),
+            Pattern::Multijitter { jitter } => multijitter::sample_1d(key, index, spp, d, jitter),
+            Pattern::LowDiscrepancy => ldsampler::sample_1d(key, index, spp, d),
+            Pattern::Orthogonal { jitter } => orthogonal::sample_1d(key, index, spp, d, jitter),
         }
     }
 
@@ -108,12 +208,20 @@ impl SampleStream {
     pub fn next_2d(&mut self) -> Vec2 {
         let d = self.dim;
         self.dim += 2;
-        match self.strata {
-            None => Vec2::new(
-                independent::uniform(self.key, self.index, d),
-                independent::uniform(self.key, self.index, d + 1),
+        let (key, index, spp) = (self.key, self.index, self.spp);
+        match self.pattern {
+            Pattern::Independent => Vec2::new(
+                independent::uniform(key, index, d),
+                independent::uniform(key, index, d + 1),
             ),
-            Some(jitter) => stratified::sample_2d(self.key, self.index, self.spp, d, jitter),
+            Pattern::Stratified { jitter } => stratified::sample_2d(key, index, spp, d, jitter),
+            Pattern::Multijitter { jitter } => multijitter::sample_2d(key, index, spp, d, jitter),
+            Pattern::LowDiscrepancy => ldsampler::sample_2d(key, index, spp, d),
+            // an orthogonal array stratifies every pair of dimensions
+            Pattern::Orthogonal { jitter } => Vec2::new(
+                orthogonal::sample_1d(key, index, spp, d, jitter),
+                orthogonal::sample_1d(key, index, spp, d + 1, jitter),
+            ),
         }
     }
 
@@ -138,9 +246,56 @@ pub(crate) fn to_unit(x: u64) -> f32 {
     (x >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
 }
 
+/// Kensler's hashed permutation of `i` in [0, n) with seed `p`
+/// (Kensler 2013, "Correlated Multi-Jittered Sampling"): a bijection of
+/// [0, n) per seed, evaluated without tables (cycle-walking over the next
+/// power of two).
+pub(crate) fn permute(mut i: u32, n: u32, p: u32) -> u32 {
+    if n <= 1 {
+        return 0;
+    }
+    let mut w = n - 1;
+    w |= w >> 1;
+    w |= w >> 2;
+    w |= w >> 4;
+    w |= w >> 8;
+    w |= w >> 16;
+    loop {
+        i ^= p;
+        i = i.wrapping_mul(0xe170893d);
+        i ^= p >> 16;
+        i ^= (i & w) >> 4;
+        i ^= p >> 8;
+        i = i.wrapping_mul(0x0929eb3f);
+        i ^= p >> 23;
+        i ^= (i & w) >> 1;
+        i = i.wrapping_mul(1 | p >> 27);
+        i = i.wrapping_mul(0x6935fa69);
+        i ^= (i & w) >> 11;
+        i = i.wrapping_mul(0x74dcb303);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0x9e501cc3);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0xc860a3df);
+        i &= w;
+        i ^= i >> 5;
+        if i < n {
+            return (i + p) % n;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const KINDS: [&str; 5] = [
+        "independent",
+        "stratified",
+        "multijitter",
+        "ldsampler",
+        "orthogonal",
+    ];
 
     fn sampler(kind: &str, spp: u32) -> Sampler {
         match kind {
@@ -148,13 +303,28 @@ mod tests {
                 sample_count: spp,
                 seed: 0,
             }),
-            _ => Sampler::Stratified(Stratified::new(spp, 0, true)),
+            "stratified" => Sampler::Stratified(Stratified::new(spp, 0, true)),
+            "multijitter" => Sampler::Multijitter(Multijitter {
+                sample_count: spp,
+                seed: 0,
+                jitter: true,
+            }),
+            "ldsampler" => Sampler::LowDiscrepancy(LowDiscrepancy {
+                sample_count: spp,
+                seed: 0,
+            }),
+            "orthogonal" => Sampler::Orthogonal(Orthogonal {
+                sample_count: spp,
+                seed: 0,
+                jitter: true,
+            }),
+            _ => unreachable!("test sampler kinds are listed in KINDS"),
         }
     }
 
     #[test]
     fn streams_are_pure_functions_of_their_coordinates() {
-        for kind in ["independent", "stratified"] {
+        for kind in KINDS {
             let s = sampler(kind, 16);
             let a: Vec<f32> = {
                 let mut st = s.stream(3, 17, 5, 16);
@@ -171,10 +341,11 @@ mod tests {
     }
 
     /// Means and a coarse histogram of many streams are uniform; a failure
-    /// here would bias every estimate.
+    /// here would bias every estimate. (64 samples per pass: orthogonal
+    /// arrays are built for 121 and use part of one.)
     #[test]
     fn samples_are_uniform() {
-        for kind in ["independent", "stratified"] {
+        for kind in KINDS {
             let s = sampler(kind, 64);
             let mut hist = [0u32; 16];
             let n_pix = 500;

@@ -5,7 +5,7 @@
 //! (pixel, dimension) (Kensler 2013, "Correlated Multi-Jittered Sampling"),
 //! so they stay a pure function of (seed, pixel, index, dimension).
 
-use super::{independent::uniform, mix64};
+use super::{independent::uniform, mix64, permute};
 use crate::error::Result;
 use crate::scene::Node;
 use glam::Vec2;
@@ -39,42 +39,6 @@ impl Stratified {
 
     pub fn sample_count(&self) -> u32 {
         self.resolution * self.resolution
-    }
-}
-
-/// Kensler's hashed permutation of `i` in [0, n).
-fn permute(mut i: u32, n: u32, p: u32) -> u32 {
-    if n <= 1 {
-        return 0;
-    }
-    let mut w = n - 1;
-    w |= w >> 1;
-    w |= w >> 2;
-    w |= w >> 4;
-    w |= w >> 8;
-    w |= w >> 16;
-    loop {
-        i ^= p;
-        i = i.wrapping_mul(0xe170893d);
-        i ^= p >> 16;
-        i ^= (i & w) >> 4;
-        i ^= p >> 8;
-        i = i.wrapping_mul(0x0929eb3f);
-        i ^= p >> 23;
-        i ^= (i & w) >> 1;
-        i = i.wrapping_mul(1 | p >> 27);
-        i = i.wrapping_mul(0x6935fa69);
-        i ^= (i & w) >> 11;
-        i = i.wrapping_mul(0x74dcb303);
-        i ^= (i & w) >> 2;
-        i = i.wrapping_mul(0x9e501cc3);
-        i ^= (i & w) >> 2;
-        i = i.wrapping_mul(0xc860a3df);
-        i &= w;
-        i ^= i >> 5;
-        if i < n {
-            return (i + p) % n;
-        }
     }
 }
 

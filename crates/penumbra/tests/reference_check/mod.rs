@@ -38,7 +38,7 @@
 //! expected value.
 
 use penumbra::image::read_image;
-use penumbra::integrator::{render, RenderOptions};
+use penumbra::integrator::{render, RenderOptions, Rendered};
 use penumbra::scene::Scene;
 use std::path::Path;
 
@@ -62,6 +62,30 @@ fn mean_var(v: &[f64]) -> (f64, f64) {
         m,
         v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0),
     )
+}
+
+/// The R, G, B channels of a render whose film has more (the image of
+/// an integrator that also writes AOVs or moments, an rgba film's alpha).
+fn rgb_of(img: Rendered) -> Result<Rendered, String> {
+    if img.channels() == 3 {
+        return Ok(img);
+    }
+    if img.channel_names.len() < 3 || img.channel_names[..3] != ["R", "G", "B"] {
+        return Err(format!(
+            "the render's channels {:?} do not start with R, G, B",
+            img.channel_names
+        ));
+    }
+    let data = img
+        .data
+        .chunks_exact(img.channels())
+        .flat_map(|px| px[..3].iter().copied())
+        .collect();
+    Ok(Rendered {
+        channel_names: img.channel_names[..3].to_vec(),
+        data,
+        ..img
+    })
 }
 
 /// Renders `scene_path` in [`BATCHES`] batches of `spp` samples per pixel
@@ -115,6 +139,7 @@ pub fn compare(
             },
         )
         .map_err(|e| format!("{}: {e}", scene_path.display()))?;
+        let img = rgb_of(img).map_err(|e| format!("{name}: {e}"))?;
         if (img.width, img.height, img.data.len()) != (w, h, len) {
             return Err(format!(
                 "{name}: rendered {}×{}, the reference {} is {w}×{h}",

@@ -109,6 +109,10 @@ pub struct Prop {
     pub name: String,
     pub value: Value,
     pub loc: SrcLoc,
+    /// A nested object written without a `name` attribute: `name` was
+    /// made up by the loader (Mitsuba calls such children `_arg_0`,
+    /// `_arg_1`, … where it shows their names, e.g. in moment channels).
+    pub unnamed: bool,
     used: Cell<bool>,
 }
 
@@ -118,6 +122,7 @@ impl Prop {
             name: name.into(),
             value,
             loc,
+            unnamed: false,
             used: Cell::new(false),
         }
     }
@@ -327,17 +332,26 @@ impl Node {
         }
     }
 
-    /// All nested plugins of a class, in file order (marked used).
-    pub fn children(&self, class: Class) -> Vec<Rc<Node>> {
+    /// The nested objects of `class` with the properties that hold them
+    /// (their names), in file order, marked as used.
+    pub fn child_props(&self, class: Class) -> Vec<(&Prop, Rc<Node>)> {
         self.props
             .iter()
             .filter_map(|p| match &p.value {
                 Value::Node(n) if n.class == class => {
                     p.used.set(true);
-                    Some(n.clone())
+                    Some((p, n.clone()))
                 }
                 _ => None,
             })
+            .collect()
+    }
+
+    /// All nested plugins of a class, in file order (marked used).
+    pub fn children(&self, class: Class) -> Vec<Rc<Node>> {
+        self.child_props(class)
+            .into_iter()
+            .map(|(_, n)| n)
             .collect()
     }
 

@@ -640,7 +640,9 @@ impl<'a> Builder<'a> {
                 };
                 let key = child_key(&node.key, &name, c.attr("id"));
                 let child = self.object(c, class, key)?;
-                push_prop(node, Prop::new(name, Value::Node(child), c.loc.clone()))?;
+                let mut prop = Prop::new(name, Value::Node(child), c.loc.clone());
+                prop.unnamed = c.attr("name").is_none();
+                push_prop(node, prop)?;
             } else if tag_s == "ref" {
                 c.check_attrs(&["id", "name"])?;
                 let id = c.req_attr("id")?;
@@ -652,7 +654,9 @@ impl<'a> Builder<'a> {
                         None => target.class.tag().to_string(),
                     },
                 };
-                push_prop(node, Prop::new(name, Value::Node(target), c.loc.clone()))?;
+                let mut prop = Prop::new(name, Value::Node(target), c.loc.clone());
+                prop.unnamed = c.attr("name").is_none();
+                push_prop(node, prop)?;
             } else if PROPERTY_TAGS.contains(&tag_s) {
                 let (name, value) = property(c, node.class == Class::Emitter, self.resolver)?;
                 push_prop(node, Prop::new(name, value, c.loc.clone()))?;
