@@ -524,6 +524,7 @@ pub(crate) fn scalar_param(
     name: &str,
     value: f32,
     flags: ParamFlags,
+    domain: Domain,
     ctx: &mut LoadContext,
 ) -> Result<ParamId> {
     ctx.store.add(
@@ -531,7 +532,7 @@ pub(crate) fn scalar_param(
         vec![value],
         vec![1],
         flags,
-        Domain::Positive,
+        domain,
     )
 }
 
