@@ -10,7 +10,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamView};
+use crate::params::{Domain, ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -33,7 +33,14 @@ pub struct Dielectric {
 impl Dielectric {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Dielectric> {
         let eta = eta_props(node, 1.5046, 1.000277)?;
-        let eta = scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?;
+        let eta = scalar_param(
+            node,
+            "eta",
+            eta,
+            ParamFlags::NON_DIFFERENTIABLE,
+            Domain::Positive,
+            ctx,
+        )?;
         let (specular_reflectance, specular_transmittance) = specular_factors(node, ctx)?;
         Ok(Dielectric {
             eta,

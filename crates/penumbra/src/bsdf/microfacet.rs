@@ -16,7 +16,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::V3;
 use crate::params::{Domain, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::{LoadContext, Node, Value};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f64::consts::PI as PI64;
@@ -41,12 +41,19 @@ pub struct MicrofacetDistribution<R> {
     pub sample_visible: bool,
 }
 
+/// The smallest roughness a distribution has: Mitsuba clamps `alpha_u` and
+/// `alpha_v` to it, so that a rough BSDF given `alpha = 0` renders as an
+/// almost smooth one instead of dividing by zero.
+pub const MIN_ALPHA: f32 = 1e-4;
+
 impl<R: Real> MicrofacetDistribution<R> {
+    /// The distribution of roughness (`alpha_u`, `alpha_v`), each clamped
+    /// to at least [`MIN_ALPHA`] (below it the derivative is zero).
     pub fn new(kind: MicrofacetType, alpha_u: R, alpha_v: R, sample_visible: bool) -> Self {
         MicrofacetDistribution {
             kind,
-            alpha_u,
-            alpha_v,
+            alpha_u: alpha_u.max(R::cst(MIN_ALPHA)),
+            alpha_v: alpha_v.max(R::cst(MIN_ALPHA)),
             sample_visible,
         }
     }
@@ -292,9 +299,28 @@ pub(crate) fn erfinv(z: f64) -> f64 {
     )
 }
 
+/// Warns that the roughness `name` of `node`, given as the number 0, is
+/// clamped to [`MIN_ALPHA`] (Mitsuba renders it so, with a warning too).
+pub(crate) fn warn_if_smooth(node: &Node, name: &str) {
+    let Some(p) = node.prop(name) else { return };
+    let zero = match p.value {
+        Value::Float(v) => v == 0.0,
+        Value::Spectrum(v) => v == 0.0,
+        _ => false,
+    };
+    if zero {
+        crate::warn::warn(format!(
+            "{}: {node}: {name} = 0 is clamped to {MIN_ALPHA}, as Mitsuba does; \
+             the smooth BSDF (conductor, dielectric, plastic) renders zero roughness exactly",
+            p.loc
+        ));
+    }
+}
+
 /// Roughness parameters of a microfacet plugin as Mitsuba 3 names them:
 /// `distribution` (`beckmann` | `ggx`), `alpha` or `alpha_u` + `alpha_v`
-/// (float or texture, default 0.1), `sample_visible` (default true).
+/// (float or texture ≥ 0, default 0.1, clamped to [`MIN_ALPHA`]),
+/// `sample_visible` (default true).
 #[derive(Clone, Debug)]
 pub struct Roughness {
     pub kind: MicrofacetType,
@@ -317,18 +343,33 @@ impl Roughness {
             if node.has("alpha") {
                 return Err(node.error("give either 'alpha' or 'alpha_u' and 'alpha_v', not both"));
             }
-            let au =
-                Texture::from_prop(node, "alpha_u", None, Channels::Mono, Domain::Positive, ctx)?;
-            let av =
-                Texture::from_prop(node, "alpha_v", None, Channels::Mono, Domain::Positive, ctx)?;
+            warn_if_smooth(node, "alpha_u");
+            warn_if_smooth(node, "alpha_v");
+            let au = Texture::from_prop(
+                node,
+                "alpha_u",
+                None,
+                Channels::Mono,
+                Domain::NonNegative,
+                ctx,
+            )?;
+            let av = Texture::from_prop(
+                node,
+                "alpha_v",
+                None,
+                Channels::Mono,
+                Domain::NonNegative,
+                ctx,
+            )?;
             (au, Some(av))
         } else {
+            warn_if_smooth(node, "alpha");
             let a = Texture::from_prop(
                 node,
                 "alpha",
                 Some(0.1),
                 Channels::Mono,
-                Domain::Positive,
+                Domain::NonNegative,
                 ctx,
             )?;
             (a, None)

@@ -542,6 +542,7 @@ pub(crate) fn scalar_param(
     name: &str,
     value: f32,
     flags: ParamFlags,
+    domain: Domain,
     ctx: &mut LoadContext,
 ) -> Result<ParamId> {
     ctx.store.add(
@@ -549,7 +550,7 @@ pub(crate) fn scalar_param(
         vec![value],
         vec![1],
         flags,
-        Domain::Positive,
+        domain,
     )
 }
 

@@ -104,7 +104,14 @@ pub(crate) fn coated_diffuse_props(
 impl Plastic {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Plastic> {
         let eta = eta_props(node, 1.49, 1.000277)?;
-        let eta = scalar_param(node, "eta", eta, ParamFlags::NON_DIFFERENTIABLE, ctx)?;
+        let eta = scalar_param(
+            node,
+            "eta",
+            eta,
+            ParamFlags::NON_DIFFERENTIABLE,
+            Domain::Positive,
+            ctx,
+        )?;
         let (diffuse_reflectance, specular_reflectance, nonlinear) =
             coated_diffuse_props(node, ctx)?;
         Ok(Plastic {

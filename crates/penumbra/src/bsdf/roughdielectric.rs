@@ -12,7 +12,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamView};
+use crate::params::{Domain, ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -35,7 +35,14 @@ pub struct RoughDielectric {
 impl RoughDielectric {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<RoughDielectric> {
         let eta = eta_props(node, 1.5046, 1.000277)?;
-        let eta = scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let eta = scalar_param(
+            node,
+            "eta",
+            eta,
+            ParamFlags::DIFFERENTIABLE,
+            Domain::Positive,
+            ctx,
+        )?;
         let roughness = Roughness::from_node(node, ctx)?;
         let (specular_reflectance, specular_transmittance) = specular_factors(node, ctx)?;
         Ok(RoughDielectric {

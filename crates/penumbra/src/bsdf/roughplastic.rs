@@ -8,7 +8,8 @@
 
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet::{
-    beckmann_visible_slope_x, erfinv, sample_ggx_visible, MicrofacetDistribution, MicrofacetType,
+    beckmann_visible_slope_x, erfinv, sample_ggx_visible, warn_if_smooth, MicrofacetDistribution,
+    MicrofacetType, MIN_ALPHA,
 };
 use super::plastic::{coated_diffuse, coated_diffuse_props, sampling_weight, specular_probability};
 use super::{
@@ -19,7 +20,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamStore, ParamView};
+use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
@@ -60,11 +61,26 @@ impl RoughPlastic {
             "ggx" => MicrofacetType::Ggx,
             _ => MicrofacetType::Beckmann,
         };
-        let alpha = node.float_checked("alpha", 0.1, true)?;
+        warn_if_smooth(node, "alpha");
+        let alpha = node.float_checked("alpha", 0.1, false)?;
         let eta = eta_props(node, 1.49, 1.000277)?;
-        let alpha = scalar_param(node, "alpha", alpha, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let alpha = scalar_param(
+            node,
+            "alpha",
+            alpha,
+            ParamFlags::DIFFERENTIABLE,
+            Domain::NonNegative,
+            ctx,
+        )?;
         let sample_visible = node.bool("sample_visible", true)?;
-        let eta = scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let eta = scalar_param(
+            node,
+            "eta",
+            eta,
+            ParamFlags::DIFFERENTIABLE,
+            Domain::Positive,
+            ctx,
+        )?;
         let (diffuse_reflectance, specular_reflectance, nonlinear) =
             coated_diffuse_props(node, ctx)?;
         Ok(RoughPlastic {
@@ -212,6 +228,8 @@ fn interface_albedo(
 /// Mitsuba's tables: transmittance at cos θ = i/(n−1) (res 32 if η > 1,
 /// else 128), and the internal reflectance 2 · mean_i(R(μ_i; 1/η) μ_i).
 fn rough_interface_tables(kind: MicrofacetType, alpha: f32, eta: f32) -> (Vec<f32>, f32) {
+    // the roughness of the distribution the BSDF evaluates
+    let alpha = alpha.max(MIN_ALPHA);
     let res_of = |e: f32| if e > 1.0 { 32 } else { 128 };
     let gl_t = gauss_legendre(res_of(eta));
     let gl_r = gauss_legendre(res_of(1.0 / eta));

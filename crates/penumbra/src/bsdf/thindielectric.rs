@@ -11,7 +11,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
-use crate::params::{ParamFlags, ParamId, ParamView};
+use crate::params::{Domain, ParamFlags, ParamId, ParamView};
 use crate::scene::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -31,7 +31,14 @@ pub struct ThinDielectric {
 impl ThinDielectric {
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<ThinDielectric> {
         let eta = eta_props(node, 1.5046, 1.000277)?;
-        let eta = scalar_param(node, "eta", eta, ParamFlags::DIFFERENTIABLE, ctx)?;
+        let eta = scalar_param(
+            node,
+            "eta",
+            eta,
+            ParamFlags::DIFFERENTIABLE,
+            Domain::Positive,
+            ctx,
+        )?;
         let (specular_reflectance, specular_transmittance) = specular_factors(node, ctx)?;
         Ok(ThinDielectric {
             eta,

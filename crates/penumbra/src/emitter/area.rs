@@ -14,7 +14,9 @@ use glam::{Vec2, Vec3};
 /// Radiance `radiance` (a value or a texture over the shape's uv, key
 /// `<shape key>.emitter.radiance.value` for a value) leaving shape `shape`
 /// on the side of its normal; nothing leaves the back side. Sampled by
-/// the shape's uniform-area position sampling, converted to solid angle.
+/// the shape's position sampling for the lit point
+/// ([`ShapeT::sample_position_from`]: uniform by area, or by solid angle
+/// for a sphere seen from outside), converted to solid angle.
 #[derive(Clone, Debug)]
 pub struct Area {
     pub radiance: Texture,
@@ -102,7 +104,7 @@ impl EmitterT for Area {
         u: Vec2,
     ) -> Option<EmitterSample<R>> {
         let shape = shapes.get(self.shape as usize)?;
-        let ps = shape.sample_position(store, u);
+        let ps = shape.sample_position_from(store, ref_p.val(), u);
         let hit = Hit {
             t: 0.0,
             shape: self.shape,
@@ -117,11 +119,10 @@ impl EmitterT for Area {
         self.sample_from_position(store, &ps, y, ref_p)
     }
 
-    /// Assumes the shape's `sample_position` is uniform by area (density
-    /// `1 / surface_area`), as `ShapeT` specifies.
+    /// The solid-angle form of the shape's [`ShapeT::pdf_position_from`].
     fn pdf_direction(
         &self,
-        _store: &ParamStore,
+        store: &ParamStore,
         shapes: &[Shape],
         ref_p: Vec3,
         d: Vec3,
@@ -131,11 +132,11 @@ impl EmitterT for Area {
         let Some(shape) = shapes.get(self.shape as usize) else {
             return 0.0;
         };
-        let area = shape.surface_area();
-        if !(area > 0.0) {
+        if !(shape.surface_area() > 0.0) {
             return 0.0;
         }
-        Area::pdf_from_area(1.0 / area, ref_p, d, p, n)
+        let pdf_area = shape.pdf_position_from(store, ref_p, p, n);
+        Area::pdf_from_area(pdf_area, ref_p, d, p, n)
     }
 
     /// Radiance towards `si.wi` if it is on the front side (shading frame

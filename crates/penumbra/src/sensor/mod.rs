@@ -241,41 +241,93 @@ impl Sensor {
     }
 }
 
-/// The horizontal field of view (degrees) from Mitsuba's `fov` and
-/// `fov_axis` (x, y, diagonal, smaller, larger) for a film of aspect
-/// ratio `aspect` = width / height.
+/// The horizontal field of view (degrees) of a film of aspect ratio
+/// `aspect` = width / height, as Mitsuba reads it: either `fov` (degrees)
+/// along `fov_axis` (x, the default; y, diagonal, smaller, larger), or
+/// `focal_length` (default "50mm", 35 mm film equivalent), which gives the
+/// diagonal field of view of a 36 × 24 mm frame. Not both.
 pub(crate) fn fov_x(node: &Node, aspect: f32) -> Result<f32> {
-    let fov = if node.has("focal_length") {
-        let s = node.string("focal_length", "50mm")?;
-        let mm: f32 =
-            s.trim_end_matches("mm").trim().parse().map_err(|_| {
-                node.error(format!("focal_length '{s}' is not a length like '50mm'"))
-            })?;
-        // 35 mm film: 36 mm wide
-        return Ok(2.0 * (36.0 / (2.0 * mm)).atan().to_degrees());
-    } else {
-        node.float("fov", 45.0)?
+    let (fov, axis) = match node.prop("fov") {
+        Some(p) => {
+            if node.has("focal_length") {
+                return Err(node.prop_error(
+                    p,
+                    "give either a field of view ('fov') or a focal length ('focal_length'), not both",
+                ));
+            }
+            let fov = node.float("fov", 0.0)?;
+            let axis = node.string("fov_axis", "x")?.to_lowercase();
+            let axis = match axis.as_str() {
+                "smaller" if aspect > 1.0 => "y".to_string(),
+                "smaller" => "x".to_string(),
+                "larger" if aspect > 1.0 => "x".to_string(),
+                "larger" => "y".to_string(),
+                "x" | "y" | "diagonal" => axis,
+                _ => {
+                    let p = node
+                        .prop("fov_axis")
+                        .expect("a non-default value came from a property");
+                    return Err(node.prop_error(
+                        p,
+                        format!("'{axis}' is not one of: x, y, diagonal, smaller, larger"),
+                    ));
+                }
+            };
+            (fov as f64, axis)
+        }
+        None => {
+            if let Some(p) = node.prop("fov_axis") {
+                return Err(node.prop_error(
+                    p,
+                    "applies to 'fov' only (a focal length gives the diagonal field of view); \
+                     remove it or give 'fov'",
+                ));
+            }
+            let s = node.string("focal_length", "50mm")?;
+            let mm: f64 = s
+                .strip_suffix("mm")
+                .unwrap_or(&s)
+                .trim()
+                .parse()
+                .ok()
+                .filter(|mm: &f64| *mm > 0.0 && mm.is_finite())
+                .ok_or_else(|| {
+                    let p = node.prop("focal_length").expect("the default parses");
+                    node.prop_error(p, format!("'{s}' is not a focal length like '50mm'"))
+                })?;
+            // the diagonal of a 36 × 24 mm frame
+            let diagonal = (36.0f64 * 36.0 + 24.0 * 24.0).sqrt();
+            (
+                2.0 * (diagonal / (2.0 * mm)).atan().to_degrees(),
+                "diagonal".to_string(),
+            )
+        }
     };
-    if !(fov > 0.0 && fov < 180.0) {
-        let p = node.prop("fov").expect("fov came from a property");
-        return Err(node.prop_error(p, format!("must be in (0, 180) degrees, found {fov}")));
+    let x_fov = x_fov_along(fov, &axis, aspect as f64);
+    if !(x_fov > 0.0 && x_fov < 180.0) {
+        let p = node
+            .prop("fov")
+            .or_else(|| node.prop("focal_length"))
+            .expect("the default focal length is in range");
+        return Err(node.prop_error(
+            p,
+            format!("gives a horizontal field of view of {x_fov} degrees; it must be in (0, 180)"),
+        ));
     }
-    let axis = node.choice("fov_axis", &["x", "y", "diagonal", "smaller", "larger"])?;
+    Ok(x_fov as f32)
+}
+
+/// The horizontal field of view (degrees) of a film of aspect ratio
+/// `aspect` whose field of view along `axis` (x, y or diagonal) is `fov`:
+/// the half-angle tangents scale with the film's extent along each axis.
+fn x_fov_along(fov: f64, axis: &str, aspect: f64) -> f64 {
     let t = (fov.to_radians() * 0.5).tan();
-    let axis = match axis.as_str() {
-        "smaller" if aspect > 1.0 => "y",
-        "smaller" => "x",
-        "larger" if aspect > 1.0 => "x",
-        "larger" => "y",
-        a => a,
-    };
     let tx = match axis {
         "x" => t,
         "y" => t * aspect,
-        // diagonal: tan scales with the diagonal length
         _ => t * aspect / (1.0 + aspect * aspect).sqrt(),
     };
-    Ok(2.0 * tx.atan().to_degrees())
+    2.0 * tx.atan().to_degrees()
 }
 
 /// Near/far clipping distances (along the view axis).
@@ -291,46 +343,61 @@ pub(crate) fn clip_range(node: &Node) -> Result<(f32, f32)> {
 }
 
 /// The pinhole part shared by the perspective and thin-lens cameras:
-/// `<key>.x_fov` (horizontal field of view, degrees) and
-/// `<key>.principal_point_offset_x` / `_y` (in units of the film size),
-/// with the film's aspect ratio and the clip range.
+/// `<key>.x_fov` (horizontal field of view, degrees), with the film's
+/// aspect ratio and the clip range, and for the perspective camera only (as
+/// in Mitsuba) `<key>.principal_point_offset_x` / `_y`, the position of
+/// the principal point relative to the film's centre in units of the film
+/// size.
 #[derive(Clone, Debug)]
 pub struct Frustum {
     pub x_fov: ParamId,
-    pub principal_point_offset: [ParamId; 2],
+    pub principal_point_offset: Option<[ParamId; 2]>,
     pub aspect: f32,
     pub near: f32,
     pub far: f32,
 }
 
 impl Frustum {
-    fn from_node(node: &Node, aspect: f32, store: &mut ParamStore) -> Result<Frustum> {
+    fn from_node(
+        node: &Node,
+        aspect: f32,
+        principal_point: bool,
+        store: &mut ParamStore,
+    ) -> Result<Frustum> {
         let fov = fov_x(node, aspect)?;
         let (near, far) = clip_range(node)?;
-        let offset_x = node.float("principal_point_offset_x", 0.0)?;
-        let offset_y = node.float("principal_point_offset_y", 0.0)?;
+        let x_fov = add_scalar(node, "x_fov", fov, Domain::Positive, store)?;
+        let principal_point_offset = if principal_point {
+            let mut offset = |name: &str| {
+                let v = node.float(name, 0.0)?;
+                add_scalar(node, name, v, Domain::Finite, store)
+            };
+            Some([
+                offset("principal_point_offset_x")?,
+                offset("principal_point_offset_y")?,
+            ])
+        } else {
+            None
+        };
         Ok(Frustum {
-            x_fov: add_scalar(node, "x_fov", fov, Domain::Positive, store)?,
-            principal_point_offset: [
-                add_scalar(
-                    node,
-                    "principal_point_offset_x",
-                    offset_x,
-                    Domain::Finite,
-                    store,
-                )?,
-                add_scalar(
-                    node,
-                    "principal_point_offset_y",
-                    offset_y,
-                    Domain::Finite,
-                    store,
-                )?,
-            ],
+            x_fov,
+            principal_point_offset,
             aspect,
             near,
             far,
         })
+    }
+
+    /// `tan(x_fov / 2)` and the principal point offset, in `R`.
+    #[inline(always)]
+    fn read<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
+        // `to_radians` spelled out, as the same f32 operations
+        let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
+        let offset = match self.principal_point_offset {
+            Some(ids) => ids.map(|id| store.read::<R>(id, 0)),
+            None => [R::cst(0.0); 2],
+        };
+        (tan_x, offset)
     }
 
     /// The store's domain check gives fov > 0; a pinhole cannot see 180°.
@@ -347,14 +414,13 @@ impl Frustum {
 
     /// Camera-space direction (z = 1, not normalised) through film position
     /// `pos` ∈ [0,1]², as Mitsuba maps it: film x grows towards camera −x
-    /// ("left" is +x), film y downwards.
+    /// ("left" is +x), film y downwards, and the principal point offset is
+    /// added to the film position before the mapping.
     #[inline(always)]
     fn direction<R: Real>(&self, store: &ParamView, pos: Vec2) -> V3<R> {
-        // `to_radians` spelled out, as the same f32 operations
-        let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
-        let [ox, oy] = self.principal_point_offset.map(|id| store.read::<R>(id, 0));
-        let x = (R::cst(1.0 - 2.0 * pos.x) + ox * 2.0) * tan_x;
-        let y = (R::cst(1.0 - 2.0 * pos.y) + oy * 2.0) * tan_x / self.aspect;
+        let (tan_x, [ox, oy]) = self.read::<R>(store);
+        let x = (R::cst(1.0 - 2.0 * pos.x) - ox * 2.0) * tan_x;
+        let y = (R::cst(1.0 - 2.0 * pos.y) - oy * 2.0) * tan_x / self.aspect;
         V3::new(x, y, R::cst(1.0))
     }
 }

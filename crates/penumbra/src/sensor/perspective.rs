@@ -22,7 +22,7 @@ impl Perspective {
         // Mitsuba accepts (and ignores) a focus distance on pinholes.
         node.float("focus_distance", 0.0)?;
         Ok(Perspective {
-            frustum: Frustum::from_node(node, aspect, store)?,
+            frustum: Frustum::from_node(node, aspect, true, store)?,
         })
     }
 

@@ -44,9 +44,7 @@ impl Sensor {
         let (kind, near) = match &self.camera {
             Camera::Perspective(c) => {
                 let f = &c.frustum;
-                let tan_x =
-                    (store.read::<R>(f.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
-                let offset = f.principal_point_offset.map(|id| store.read::<R>(id, 0));
+                let (tan_x, offset) = f.read::<R>(store);
                 let aspect = f.aspect;
                 (
                     Kind::Pinhole {
@@ -91,7 +89,7 @@ impl<R: Real> Projector<R> {
     /// whose ray [`Sensor::ray`] passes through `q`.
     pub fn film(&self, q: V3<R>) -> V2<R> {
         match &self.kind {
-            // ray direction ∝ ((1 − 2x + 2ox)·tan, (1 − 2y + 2oy)·tan / aspect, 1)
+            // ray direction ∝ ((1 − 2x − 2ox)·tan, (1 − 2y − 2oy)·tan / aspect, 1)
             Kind::Pinhole {
                 tan_x,
                 offset,
@@ -99,8 +97,8 @@ impl<R: Real> Projector<R> {
             } => {
                 let zt = q.z * *tan_x;
                 V2::new(
-                    (offset[0] * 2.0 + 1.0 - q.x / zt) * 0.5,
-                    (offset[1] * 2.0 + 1.0 - q.y * *aspect / zt) * 0.5,
+                    (R::cst(1.0) - q.x / zt) * 0.5 - offset[0],
+                    (R::cst(1.0) - q.y * *aspect / zt) * 0.5 - offset[1],
                 )
             }
             // ray origin = to_world (1 − 2x, (1 − 2y) / aspect, 0)
@@ -145,10 +143,18 @@ mod tests {
     use glam::Vec2;
     use std::path::Path;
 
+    /// A `sensor` camera (perspective ones with a principal point offset).
     fn scene(sensor: &str) -> Scene {
+        let offset = if sensor == "perspective" {
+            r#"<float name="principal_point_offset_x" value="0.1"/>
+               <float name="principal_point_offset_y" value="-0.05"/>"#
+        } else {
+            ""
+        };
         let xml = format!(
             r#"<scene version="3.0.0">
                 <sensor type="{sensor}" id="cam">
+                    {offset}
                     <transform name="to_world">
                         <lookat origin="1, 2, -3" target="0.2, 0, 0.5" up="0, 1, 0"/>
                         <scale value="1.5"/>
@@ -197,6 +203,8 @@ mod tests {
             ("perspective", "cam.to_world", 3),
             ("perspective", "cam.to_world", 5),
             ("perspective", "cam.x_fov", 0),
+            ("perspective", "cam.principal_point_offset_x", 0),
+            ("perspective", "cam.principal_point_offset_y", 0),
             ("orthographic", "cam.to_world", 11),
             ("orthographic", "cam.to_world", 0),
         ] {

@@ -1,8 +1,9 @@
 //! The thin-lens camera with depth of field (Mitsuba's `thinlens`).
 //!
-//! Parameters: those of the pinhole (`<key>.to_world`, `<key>.x_fov`,
-//! `<key>.principal_point_offset_x`, `_y`), `<key>.aperture_radius` and
-//! `<key>.focus_distance`.
+//! Parameters: `<key>.to_world`, `<key>.x_fov`, `<key>.aperture_radius`
+//! and `<key>.focus_distance`. As in Mitsuba, `aperture_radius` is
+//! required, `focus_distance` defaults to `far_clip`, and there is no
+//! principal point offset.
 
 use super::{add_scalar, Frustum, ToWorld};
 use crate::ad::Real;
@@ -23,12 +24,13 @@ pub struct ThinLens {
 
 impl ThinLens {
     pub fn from_node(node: &Node, aspect: f32, store: &mut ParamStore) -> Result<ThinLens> {
-        let frustum = Frustum::from_node(node, aspect, store)?;
-        let focus_distance = node.float_checked("focus_distance", 0.0, false)?;
-        if !(focus_distance > 0.0) {
-            return Err(node.error("thinlens needs a focus_distance > 0"));
+        let frustum = Frustum::from_node(node, aspect, false, store)?;
+        let focus_distance = node.float_checked("focus_distance", frustum.far, true)?;
+        let aperture_radius = node.float_req("aperture_radius")?;
+        if aperture_radius < 0.0 {
+            let p = node.prop("aperture_radius").expect("a required parameter");
+            return Err(node.prop_error(p, format!("must be >= 0, found {aperture_radius}")));
         }
-        let aperture_radius = node.float_checked("aperture_radius", 0.03, false)?;
         Ok(ThinLens {
             frustum,
             aperture_radius: add_scalar(

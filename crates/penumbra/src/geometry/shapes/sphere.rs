@@ -16,7 +16,7 @@ use super::{analytic_interaction, azimuth};
 use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
-use crate::math::{warp, V2, V3};
+use crate::math::{warp, Frame, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
 use glam::{Mat3, Mat4, Vec2, Vec3};
@@ -248,18 +248,56 @@ impl ShapeT for Sphere {
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
         let (c, r) = self.center_radius(store);
-        let local = warp::square_to_uniform_sphere(u);
-        let nw = self.rot * local;
-        let theta = local.z.clamp(-1.0, 1.0).acos();
-        let phi = azimuth(local.y, local.x);
-        PositionSample {
-            p: c + nw * r,
-            n: if self.flip_normals { -nw } else { nw },
-            uv: Vec2::new(phi / (2.0 * PI), theta / PI),
-            local: Vec2::ZERO,
-            pdf: 1.0 / self.area,
-            prim: 0,
-        }
+        let mut ps = self.position_at(c, r, self.rot * warp::square_to_uniform_sphere(u));
+        ps.pdf = 1.0 / self.area;
+        ps
+    }
+
+    /// Seen from outside: uniform over the cone of directions the sphere
+    /// subtends at `ref_p`, as Mitsuba's sphere samples (Shirley and Wang
+    /// 1996, "Monte Carlo techniques for direct lighting calculations";
+    /// the point on the sphere is found from the angle at the centre, as
+    /// in Pharr et al., "Physically Based Rendering", 4th ed., §6.2.4,
+    /// which stays accurate for small and distant spheres). The density
+    /// per unit solid angle is `1 / (2π (1 − cos θ_max))`. From inside:
+    /// uniform by area.
+    fn sample_position_from(&self, store: &ParamStore, ref_p: Vec3, u: Vec2) -> PositionSample {
+        let (c, r) = self.center_radius(store);
+        let Some(cone) = Cone::new(c, r, ref_p) else {
+            return self.sample_position(store, u);
+        };
+        // the angle θ from the cone's axis; 1 − cos θ is formed directly
+        let one_minus_cos = u.y * cone.one_minus_cos_max;
+        let cos_theta = 1.0 - one_minus_cos;
+        let sin2_theta = one_minus_cos * (2.0 - one_minus_cos);
+        // the angle α at the centre between the axis (towards ref_p) and
+        // the point where that direction first meets the sphere
+        let cos_alpha = sin2_theta / cone.sin_max
+            + cos_theta
+                * (1.0 - sin2_theta / (cone.sin_max * cone.sin_max))
+                    .max(0.0)
+                    .sqrt();
+        let sin_alpha = (1.0 - cos_alpha * cos_alpha).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.x;
+        let frame = Frame::<f32>::from_normal(V3::cst(cone.axis));
+        let local = Vec3::new(sin_alpha * phi.cos(), sin_alpha * phi.sin(), cos_alpha);
+        // α is measured from the axis towards ref_p: the visible cap
+        let nw = frame.to_world(V3::cst(local)).val();
+        let mut ps = self.position_at(c, r, nw);
+        ps.pdf = self.pdf_position_from(store, ref_p, ps.p, ps.n);
+        ps
+    }
+
+    fn pdf_position_from(&self, store: &ParamStore, ref_p: Vec3, p: Vec3, n: Vec3) -> f32 {
+        let (c, r) = self.center_radius(store);
+        let Some(cone) = Cone::new(c, r, ref_p) else {
+            return 1.0 / self.area;
+        };
+        // solid angle to area at p
+        let to = ref_p - p;
+        let dist2 = to.length_squared();
+        let cos = n.dot(to).abs() / dist2.sqrt();
+        cos / (dist2 * 2.0 * PI * cone.one_minus_cos_max)
     }
 
     fn surface_area(&self) -> f32 {
@@ -267,7 +305,52 @@ impl ShapeT for Sphere {
     }
 }
 
+/// The cone of directions a sphere subtends at a point outside it.
+struct Cone {
+    /// Unit vector from the sphere's centre towards the point.
+    axis: Vec3,
+    /// sin θ_max = r / distance.
+    sin_max: f32,
+    /// 1 − cos θ_max, accurate for narrow cones.
+    one_minus_cos_max: f32,
+}
+
+impl Cone {
+    /// The cone of the sphere (`c`, `r`) seen from `ref_p`; `None` from
+    /// inside or on the sphere.
+    fn new(c: Vec3, r: f32, ref_p: Vec3) -> Option<Cone> {
+        let to = ref_p - c;
+        let dist2 = to.length_squared();
+        if !(dist2 > r * r) {
+            return None;
+        }
+        let sin2_max = r * r / dist2;
+        let cos_max = (1.0 - sin2_max).max(0.0).sqrt();
+        Some(Cone {
+            axis: to / dist2.sqrt(),
+            sin_max: sin2_max.sqrt(),
+            one_minus_cos_max: sin2_max / (1.0 + cos_max),
+        })
+    }
+}
+
 impl Sphere {
+    /// The position sample at unit direction `nw` from the centre `c` of
+    /// the sphere of radius `r` (density left zero for the caller).
+    fn position_at(&self, c: Vec3, r: f32, nw: Vec3) -> PositionSample {
+        let local = self.rot.transpose() * nw;
+        let theta = local.z.clamp(-1.0, 1.0).acos();
+        let phi = azimuth(local.y, local.x);
+        PositionSample {
+            p: c + nw * r,
+            n: if self.flip_normals { -nw } else { nw },
+            uv: Vec2::new(phi / (2.0 * PI), theta / PI),
+            local: Vec2::ZERO,
+            pdf: 0.0,
+            prim: 0,
+        }
+    }
+
     /// Normal, uv and shading frame at point `p` of the sphere (centre `c`,
     /// radius `r`); the area scale is r² (area per unit solid angle seen
     /// from the centre).
