@@ -411,6 +411,46 @@ fn rectangle_translation_matches_finite_differences() {
     );
 }
 
+/// The tangent of `key` (a `[4, 4]` to_world, row-major) when its object
+/// turns about its own origin, about its local `axis` (radians per unit):
+/// `d/dθ M·R(θ)` at θ = 0, that is `M·[axis]×`.
+fn local_rotation_tangent(scene: &Scene, key: &str, axis: [f32; 3]) -> Vec<f32> {
+    let m = scene.params.data(scene.params.require(key).unwrap());
+    let [x, y, z] = axis;
+    let k = [[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]];
+    let mut t = vec![0.0; 16];
+    for i in 0..4 {
+        for j in 0..3 {
+            t[4 * i + j] = (0..3).map(|l| m[4 * i + l] * k[l][j]).sum();
+        }
+    }
+    t
+}
+
+/// (b) The camera turned about its position (about an oblique local axis:
+/// a pan, a tilt and a roll at once), the rectangle fixed; perspective,
+/// then orthographic.
+#[test]
+fn camera_rotation_matches_finite_differences() {
+    let key = "camera.to_world";
+    for (name, xml) in [
+        ("perspective camera turned", rectangle_scene(32)),
+        (
+            "orthographic camera turned",
+            rectangle_scene_with(&orthographic_sensor(32, 4)),
+        ),
+    ] {
+        compare_with_finite_differences(
+            name,
+            &xml,
+            key,
+            |s| local_rotation_tangent(s, key, [0.3, -0.5, 0.8]),
+            0.01,
+            (1, 16),
+        );
+    }
+}
+
 /// (b) The camera translated, the rectangle fixed.
 #[test]
 fn camera_translation_matches_finite_differences() {
