@@ -471,7 +471,7 @@ mod tests {
     }
 
     /// A sphere lit from outside samples the cone it subtends uniformly
-    /// (χ² test of the directions against the density), on the side that
+    /// (the mean cosine to its axis), on the side that
     /// faces the lit point, with the density `pdf_position_from` reports;
     /// from inside it samples by area.
     #[test]
@@ -493,32 +493,33 @@ mod tests {
             let sin2 = 0.64 / (c - ref_p).length_squared();
             let cos_max = (1.0 - sin2).sqrt();
             let cone_pdf = 1.0 / (2.0 * PI * (1.0 - cos_max));
-            let r = crate::testing::Chi2Test::default().run(
-                |rng| {
-                    let ps = s.sample_position_from(store, ref_p, rng.next_2d());
-                    let to = ps.p - ref_p;
-                    let d = to.normalize();
-                    assert!(((ps.p - c).length() - 0.8).abs() < 1e-4);
-                    assert!(ps.n.dot(d) < 1e-3, "the sample faces away");
-                    // the area density is the cone's, converted
-                    let sa = ps.pdf * to.length_squared() / ps.n.dot(-d).max(1e-6);
-                    assert!((sa / cone_pdf - 1.0).abs() < 2e-2 || ps.n.dot(-d) < 1e-2);
-                    let again = s.pdf_position_from(store, ref_p, ps.p, ps.n);
-                    assert!((again - ps.pdf).abs() <= 1e-5 * ps.pdf);
-                    Some(d)
-                },
-                |d| {
-                    if d.dot(axis) >= cos_max {
-                        cone_pdf
-                    } else {
-                        0.0
-                    }
-                },
-            );
-            // a narrow cone falls into few bins: compare only the wide one
-            if sin2 > 0.1 {
-                assert!(r.p_value > 1e-3, "{r:?}");
+            // uniform over the cone: cos θ from the axis is uniform on
+            // [cos θ_max, 1], of mean (1 + cos θ_max) / 2 and variance
+            // (1 − cos θ_max)² / 12
+            let mut rng = crate::testing::Pcg32::new(7);
+            let n = 100_000;
+            let mut sum = 0.0f64;
+            for _ in 0..n {
+                let ps = s.sample_position_from(store, ref_p, rng.next_2d());
+                let to = ps.p - ref_p;
+                let d = to.normalize();
+                assert!(((ps.p - c).length() - 0.8).abs() < 1e-4);
+                assert!(ps.n.dot(d) < 1e-3, "the sample faces away");
+                assert!(d.dot(axis) >= cos_max - 1e-4, "outside the cone");
+                // the area density is the cone's, converted
+                let sa = ps.pdf * to.length_squared() / ps.n.dot(-d).max(1e-6);
+                assert!((sa / cone_pdf - 1.0).abs() < 2e-2 || ps.n.dot(-d) < 1e-2);
+                let again = s.pdf_position_from(store, ref_p, ps.p, ps.n);
+                assert!((again - ps.pdf).abs() <= 1e-5 * ps.pdf);
+                sum += d.dot(axis) as f64;
             }
+            let mean = sum / n as f64;
+            let want = (1.0 + cos_max as f64) / 2.0;
+            let stderr = (1.0 - cos_max as f64) / (12.0f64 * n as f64).sqrt();
+            assert!(
+                (mean - want).abs() < 4.0 * stderr + 1e-6,
+                "{mean} vs {want}"
+            );
         }
         let inside = s.sample_position_from(store, c + Vec3::X * 0.1, Vec2::new(0.3, 0.6));
         assert!((inside.pdf - 1.0 / s.surface_area()).abs() < 1e-6);
