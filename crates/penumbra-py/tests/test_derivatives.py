@@ -124,7 +124,7 @@ def test_geometry_derivatives_are_the_interior_term_with_a_warning(scene, capfd)
     # one warning per distinct message and process, naming the missing term
     err = capfd.readouterr().err
     assert err.count("warning: ball.center") == 1, err
-    assert "the shadows cast by spheres and disks" in err
+    assert "the shadows cast by spheres, disks and cylinders" in err
 
 
 @pytest.mark.parametrize(

@@ -537,6 +537,41 @@ fn disk_to_world() {
     check("disk to_world", &xml, "floor.to_world", |_| t.clone(), 1e-3);
 }
 
+/// A wide cylinder whose side is the floor (its outline far outside the
+/// image: only the interior term), moved, and turned about its own axis
+/// (the surface stays in place, its uv and texture slide).
+#[test]
+fn cylinder_to_world() {
+    let body = concat!(
+        r#"<shape type="cylinder" id="floor">
+            <point name="p0" x="-20" y="0" z="-20"/>
+            <point name="p1" x="20" y="0" z="-20"/>
+            <float name="radius" value="20"/>"#,
+        textured_diffuse!(),
+        r#"</shape>
+        <emitter type="point">
+            <point name="position" value="0.5, 0.5, 2"/>
+            <rgb name="intensity" value="10"/>
+        </emitter>"#
+    );
+    let xml = scene_xml(EMITTER_SAMPLING, &oblique_sensor(), body);
+    let key = "floor.to_world";
+    check(
+        "cylinder to_world moved",
+        &xml,
+        key,
+        |_| moved([0.5, -0.5, 1.0]),
+        1e-3,
+    );
+    check(
+        "cylinder to_world turned",
+        &xml,
+        key,
+        |m| turn_about_local_axis(m, 2),
+        1e-4,
+    );
+}
+
 /// ⟨δI, dI/dθ·v⟩ (forward mode) against ⟨∂L/∂θ, v⟩ (reverse mode) with
 /// L = ⟨δI, I⟩, same samples.
 fn assert_forward_matches_reverse(name: &str, xml: &str, key: &str) {

@@ -809,6 +809,32 @@ fn warnings_name_only_the_missing_terms() {
         m.contains("shadows cast by spheres") && !m.contains("indirect"),
         "{m}"
     );
+    // a cylinder's outline is not estimated: named when the cylinder
+    // moves, not when another shape does
+    let cylinder = r#"<shape type="cylinder" id="cyl"><float name="radius" value="0.2"/></shape>"#;
+    let with_cylinder = scene.replace("<shape", &format!("{cylinder}<shape"));
+    run(&with_cylinder);
+    let m = only(ours(&seen));
+    assert!(!m.contains("outlines of cylinders"), "{m}");
+    let cyl_scene = load(&with_cylinder);
+    let cyl_key = "cyl.to_world";
+    let mut t = vec![0.0f32; 16];
+    t[3] = 1.0;
+    let d = render_forward(&cyl_scene, &[(cyl_key, &t)], &opts(1, 1, 1)).unwrap();
+    let ones = vec![1.0f32; d.data.len()];
+    render_backward(&cyl_scene, &ones, Some(&[cyl_key]), &opts(1, 1, 1)).unwrap();
+    let mut all = seen.lock().unwrap();
+    let cyl: Vec<&String> = all.iter().filter(|m| m.starts_with(cyl_key)).collect();
+    assert_eq!(cyl.len(), 2, "{all:?}");
+    assert!(
+        cyl[0].contains("the outlines of cylinders")
+            && cyl[0].contains("shadows cast by spheres, disks and cylinders")
+            && !cyl[0].contains("primary visibility"),
+        "{}",
+        cyl[0]
+    );
+    all.clear();
+    drop(all);
     penumbra::warn::set_warning_sink(None);
 }
 

@@ -70,9 +70,12 @@ impl BoundaryTerms {
 /// silent.
 ///
 /// Besides a term the pass does not run at all, the estimators leave out:
-/// the shadows cast by analytic shapes (spheres, disks; their silhouettes
-/// seen by a pinhole or orthographic camera are estimated), and visibility
-/// seen from the second and later vertices of a path.
+/// the shadows cast by analytic shapes (spheres, disks, cylinders; the
+/// silhouettes of spheres and disks seen by a pinhole or orthographic
+/// camera are estimated), the outlines of cylinders seen by the camera
+/// (named when a moving key is a cylinder's or moves no other shape: the
+/// camera's), and visibility seen from the second and later vertices of a
+/// path.
 ///
 /// Returns whether any of the keys moves a visibility edge (then the
 /// boundary terms apply).
@@ -97,13 +100,15 @@ pub(crate) fn warn_missing_boundary_terms(
         // thin lenses, or no primary budget; otherwise the term covers the
         // edges of meshes and the outlines of spheres and disks
         missing.push("primary visibility (silhouettes seen by the camera)");
+    } else if cylinder_outlines_move(scene, &moving)? {
+        missing.push("the outlines of cylinders");
     }
     let area_lights = scene.emitters.iter().any(|e| !e.is_delta());
     let delta_lights = scene.emitters.iter().any(|e| e.is_delta());
     if (area_lights && !terms.shadow) || (delta_lights && !terms.delta_shadow) {
         missing.push("shadows");
     } else if scene.shapes.iter().any(analytic) {
-        missing.push("the shadows cast by spheres and disks");
+        missing.push("the shadows cast by spheres, disks and cylinders");
     }
     if scene.integrator.traces_indirect_light() {
         missing.push("indirect visibility (edges seen after a bounce)");
@@ -112,6 +117,33 @@ pub(crate) fn warn_missing_boundary_terms(
         crate::warn(missing_boundary_terms_message(&moving, &missing));
     }
     Ok(true)
+}
+
+/// Whether the outline of a cylinder moves in the image for the moving
+/// (discontinuous) `keys`: one is a cylinder's, or one moves no shape at
+/// all (the camera) while the scene holds a cylinder. A key that moves
+/// another shape leaves the cylinders' outlines in place.
+fn cylinder_outlines_move(scene: &Scene, keys: &[&str]) -> Result<bool> {
+    let mut cylinders = scene
+        .shapes
+        .iter()
+        .filter(|s| matches!(s, Shape::Cylinder(_)))
+        .peekable();
+    if cylinders.peek().is_none() {
+        return Ok(false);
+    }
+    let cylinder_ids: Vec<_> = cylinders.flat_map(|s| s.geometry_params()).collect();
+    for key in keys {
+        let id = scene.params.require(key)?;
+        let moves_a_shape = scene
+            .shapes
+            .iter()
+            .any(|s| s.geometry_params().contains(&id));
+        if cylinder_ids.contains(&id) || !moves_a_shape {
+            return Ok(true);
+        }
+    }
+    Ok(false)
 }
 
 /// The warning of [`warn_missing_boundary_terms`]: `keys` move geometry or

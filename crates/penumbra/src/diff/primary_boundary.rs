@@ -304,7 +304,9 @@ impl Outline {
 
 /// The outline of the analytic `shape` seen through `proj`, as `[c, u, v]`
 /// of [`Outline`] in `R` (moving with the shape's and the camera's
-/// parameters); `None` for a mesh, or a sphere around a pinhole.
+/// parameters); `None` for a mesh, a cylinder (its outline, two rims and
+/// two view-dependent lines, is not estimated: the derivative pass warns
+/// so), or a sphere around a pinhole.
 ///
 /// - A sphere (centre c, radius r, read as its own surface reads them:
 ///   from `to_world` when that is tracked, else from `center`, `radius`)
@@ -320,7 +322,7 @@ impl Outline {
 /// normal component of its velocity matters.
 fn outline<R: Real>(proj: &Projector<R>, store: &ParamView, shape: &Shape) -> Option<[V3<R>; 3]> {
     match shape {
-        Shape::Mesh(_) => None,
+        Shape::Mesh(_) | Shape::Cylinder(_) => None,
         Shape::Disk(d) => {
             let (c, a0, a1) = d.frame_r::<R>(store);
             Some([c, a0, a1])

@@ -63,7 +63,7 @@
 //! Not handled here: shadows of point, spot and directional emitters (their
 //! shadow edges are curves on the film, not on the sphere of directions),
 //! visibility at the second and later vertices of a path, the silhouettes
-//! of analytic shapes (spheres, disks), an emitter's own outline against
+//! of analytic shapes (spheres, disks, cylinders), an emitter's own outline against
 //! what lies behind it, thin-lens cameras. Callers warn about them
 //! ([`super::warn_missing_boundary_terms`]).
 

@@ -18,8 +18,9 @@
 //! refits the binary BVH kept from the build (same topology, new boxes) and
 //! re-derives the wide BVH from it, without a new PLOC build.
 
+use crate::geometry::shapes::cylinder::CylinderFrame;
 use crate::geometry::shapes::disk::DiskFrame;
-use crate::geometry::shapes::{Disk, Sphere};
+use crate::geometry::shapes::{Cylinder, Disk, Sphere};
 use crate::geometry::{Hit, Ray, Shape};
 use crate::params::ParamStore;
 use glam::{Vec2, Vec3, Vec4};
@@ -34,6 +35,7 @@ use std::mem::MaybeUninit;
 enum Analytic {
     Sphere { c: Vec3, r: f32 },
     Disk(DiskFrame),
+    Cylinder(CylinderFrame),
 }
 
 impl Analytic {
@@ -44,6 +46,12 @@ impl Analytic {
                 let ext = (f.a0 * f.a0 + f.a1 * f.a1).powf(0.5);
                 Aabb::new((f.c - ext).into(), (f.c + ext).into())
             }
+            // the box of the two end circles bounds the cylinder
+            Analytic::Cylinder(f) => {
+                let ext = (f.a0 * f.a0 + f.a1 * f.a1).powf(0.5);
+                let end = f.c + f.a2;
+                Aabb::new((f.c.min(end) - ext).into(), (f.c.max(end) + ext).into())
+            }
         }
     }
     #[inline]
@@ -51,6 +59,7 @@ impl Analytic {
         match self {
             Analytic::Sphere { c, r } => Sphere::intersect_f32(*c, *r, o, d, tmin, tmax),
             Analytic::Disk(f) => Disk::intersect_f32(f, o, d, tmin, tmax),
+            Analytic::Cylinder(f) => Cylinder::intersect_f32(f, o, d, tmin, tmax),
         }
     }
 }
@@ -451,6 +460,7 @@ impl Accel {
                     Some(Analytic::Sphere { c, r })
                 }
                 Shape::Disk(d) => Some(Analytic::Disk(d.frame(store))),
+                Shape::Cylinder(c) => Some(Analytic::Cylinder(c.frame(store))),
             };
             match a {
                 Some(a) => {
@@ -816,6 +826,9 @@ mod tests {
                     }
                     Shape::Disk(d) => {
                         Disk::intersect_f32(&d.frame(store), ray.o, ray.d, ray.tmin, tmax)
+                    }
+                    Shape::Cylinder(c) => {
+                        Cylinder::intersect_f32(&c.frame(store), ray.o, ray.d, ray.tmin, tmax)
                     }
                 };
                 if t > ray.tmin && t < tmax {

@@ -1,11 +1,11 @@
 //! The shape family. One file per plugin (geometry/shapes/); the enum
 //! dispatches. Mesh plugins (`ply`, `obj`, `rectangle`, `cube`) all become
-//! [`Shape::Mesh`]; `sphere` and `disk` are analytic.
+//! [`Shape::Mesh`]; `sphere`, `disk` and `cylinder` are analytic.
 
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
-use crate::geometry::shapes::{self, Disk, Sphere};
+use crate::geometry::shapes::{self, Cylinder, Disk, Sphere};
 use crate::geometry::{DiffRay, Hit, PositionSample, SurfaceInteraction};
 use crate::params::{ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
@@ -47,7 +47,7 @@ pub trait ShapeT {
 }
 
 /// Names of the shape plugins, for messages.
-pub const SHAPE_PLUGINS: [&str; 7] = [
+pub const SHAPE_PLUGINS: [&str; 8] = [
     "ply",
     "obj",
     "serialized",
@@ -55,6 +55,7 @@ pub const SHAPE_PLUGINS: [&str; 7] = [
     "cube",
     "sphere",
     "disk",
+    "cylinder",
 ];
 
 /// All shape plugins.
@@ -64,12 +65,13 @@ pub enum Shape {
     Mesh(Mesh),
     Sphere(Sphere),
     Disk(Disk),
+    Cylinder(Cylinder),
 }
 
 impl Shape {
     /// Builds a shape from its scene node. Reads only the geometric
     /// properties (`filename`, `to_world`, `face_normals`, `flip_normals`,
-    /// `flip_tex_coords`, `shape_index`, `center`, `radius`); the nested `bsdf`,
+    /// `flip_tex_coords`, `shape_index`, `center`, `radius`, `p0`, `p1`); the nested `bsdf`,
     /// `emitter`, `interior`, `exterior` are left to the scene builder.
     /// Registers the shape's parameters in `ctx.store` under `node.key`.
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Shape> {
@@ -81,6 +83,7 @@ impl Shape {
             "cube" => Shape::Mesh(shapes::cube::load(node, ctx)?),
             "sphere" => Shape::Sphere(Sphere::load(node, ctx)?),
             "disk" => Shape::Disk(Disk::load(node, ctx)?),
+            "cylinder" => Shape::Cylinder(Cylinder::load(node, ctx)?),
             other => {
                 return Err(node.error(format!(
                     "unknown shape plugin '{other}'; supported: {}",
@@ -96,6 +99,7 @@ impl Shape {
             Shape::Mesh(m) => m.plugin,
             Shape::Sphere(_) => "sphere",
             Shape::Disk(_) => "disk",
+            Shape::Cylinder(_) => "cylinder",
         }
     }
 
@@ -105,6 +109,7 @@ impl Shape {
             Shape::Mesh(m) => &m.key,
             Shape::Sphere(s) => &s.key,
             Shape::Disk(d) => &d.key,
+            Shape::Cylinder(c) => &c.key,
         }
     }
 
@@ -129,6 +134,7 @@ impl Shape {
             Shape::Mesh(m) => m.flip_normals,
             Shape::Sphere(s) => s.flip_normals,
             Shape::Disk(d) => d.flip_normals,
+            Shape::Cylinder(c) => c.flip_normals,
         }
     }
 
@@ -139,6 +145,7 @@ impl Shape {
             Shape::Mesh(m) => vec![m.positions, m.to_world_id],
             Shape::Sphere(s) => vec![s.center, s.radius, s.to_world],
             Shape::Disk(d) => vec![d.to_world],
+            Shape::Cylinder(c) => vec![c.to_world],
         }
     }
 
@@ -154,6 +161,7 @@ impl Shape {
                     || R::tracks(store, s.to_world)
             }
             Shape::Disk(d) => R::tracks(store, d.to_world),
+            Shape::Cylinder(c) => R::tracks(store, c.to_world),
         }
     }
 
@@ -173,6 +181,7 @@ impl Shape {
                 Ok(())
             }
             Shape::Disk(d) => d.parameters_changed(store),
+            Shape::Cylinder(c) => c.parameters_changed(store),
         }
     }
 }
@@ -189,6 +198,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.surface_interaction(store, ray, hit),
             Shape::Sphere(s) => s.surface_interaction(store, ray, hit),
             Shape::Disk(d) => d.surface_interaction(store, ray, hit),
+            Shape::Cylinder(c) => c.surface_interaction(store, ray, hit),
         }
     }
     #[inline]
@@ -197,6 +207,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.point_at(store, hit, p),
             Shape::Sphere(s) => s.point_at(store, hit, p),
             Shape::Disk(d) => d.point_at(store, hit, p),
+            Shape::Cylinder(c) => c.point_at(store, hit, p),
         }
     }
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
@@ -204,6 +215,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.sample_position(store, u),
             Shape::Sphere(s) => s.sample_position(store, u),
             Shape::Disk(d) => d.sample_position(store, u),
+            Shape::Cylinder(c) => c.sample_position(store, u),
         }
     }
     fn sample_position_from(&self, store: &ParamStore, ref_p: Vec3, u: Vec2) -> PositionSample {
@@ -211,6 +223,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.sample_position_from(store, ref_p, u),
             Shape::Sphere(s) => s.sample_position_from(store, ref_p, u),
             Shape::Disk(d) => d.sample_position_from(store, ref_p, u),
+            Shape::Cylinder(c) => c.sample_position_from(store, ref_p, u),
         }
     }
     fn pdf_position_from(&self, store: &ParamStore, ref_p: Vec3, p: Vec3, n: Vec3) -> f32 {
@@ -218,6 +231,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.pdf_position_from(store, ref_p, p, n),
             Shape::Sphere(s) => s.pdf_position_from(store, ref_p, p, n),
             Shape::Disk(d) => d.pdf_position_from(store, ref_p, p, n),
+            Shape::Cylinder(c) => c.pdf_position_from(store, ref_p, p, n),
         }
     }
     fn surface_area(&self) -> f32 {
@@ -225,6 +239,7 @@ impl ShapeT for Shape {
             Shape::Mesh(m) => m.surface_area(),
             Shape::Sphere(s) => s.surface_area(),
             Shape::Disk(d) => d.surface_area(),
+            Shape::Cylinder(c) => c.surface_area(),
         }
     }
 }
@@ -271,7 +286,7 @@ mod tests {
         assert!(
             e.contains("s.xml:3")
                 && e.contains("'torus'")
-                && e.contains("ply, obj, serialized, rectangle, cube, sphere, disk"),
+                && e.contains("ply, obj, serialized, rectangle, cube, sphere, disk, cylinder"),
             "{e}"
         );
     }

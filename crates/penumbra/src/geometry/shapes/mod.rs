@@ -1,8 +1,9 @@
 //! Shape plugins, one file each. Mesh plugins (`ply`, `obj`, `serialized`,
-//! `rectangle`, `cube`) produce a [`Mesh`](crate::geometry::mesh::Mesh); `sphere` and
-//! `disk` are analytic.
+//! `rectangle`, `cube`) produce a [`Mesh`](crate::geometry::mesh::Mesh); `sphere`,
+//! `disk` and `cylinder` are analytic.
 
 pub mod cube;
+pub mod cylinder;
 pub mod disk;
 pub mod obj;
 pub mod ply;
@@ -10,6 +11,7 @@ pub mod rectangle;
 pub mod serialized;
 pub mod sphere;
 
+pub use cylinder::Cylinder;
 pub use disk::Disk;
 pub use sphere::Sphere;
 
