@@ -1,8 +1,8 @@
 //! Finite differences (identical random numbers) vs forward mode vs reverse
 //! mode (path replay), for every kind of differentiable parameter: diffuse
-//! reflectance, bitmap texels, roughness, conductor η and k, specular
-//! reflectance, area / constant / envmap / point emission, and every
-//! parameter of the principled and thin principled BSDFs.
+//! reflectance, bitmap texels, mesh attributes, roughness, conductor η and
+//! k, specular reflectance, area / constant / envmap / point emission, and
+//! every parameter of the principled and thin principled BSDFs.
 //!
 //! Forward and reverse mode differentiate the very same estimate, so they
 //! must agree to rounding. Finite differences are an independent estimate
@@ -208,6 +208,47 @@ fn surface_and_emitter_parameters() {
         "bulb.intensity.value",
         "sky.radiance.value",
     ] {
+        check(&mut scene, key);
+    }
+}
+
+/// A floor coloured by its PLY vertex colours and an octahedron by its
+/// per-face colours (the conformance set's meshes), through
+/// `mesh_attribute` textures.
+fn mesh_attribute_scene() -> Scene {
+    let assets = repo().join("scenes/conformance/assets");
+    let xml = format!(
+        r#"{HEADER}
+    <shape type="ply" id="floor">
+        <string name="filename" value="{}"/>
+        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
+        <bsdf type="diffuse">
+            <texture type="mesh_attribute" name="reflectance">
+                <string name="name" value="vertex_color"/>
+            </texture>
+        </bsdf>
+    </shape>
+    <shape type="ply" id="gem">
+        <string name="filename" value="{}"/>
+        <transform name="to_world"><scale value="0.6"/><translate y="0.6"/></transform>
+        <bsdf type="diffuse">
+            <texture type="mesh_attribute" name="reflectance">
+                <string name="name" value="face_color"/>
+            </texture>
+        </bsdf>
+    </shape>
+    <emitter type="constant" id="sky"><rgb name="radiance" value="0.8, 0.85, 0.9"/></emitter>
+</scene>"#,
+        assets.join("vertex_color.ply").display(),
+        assets.join("face_color.ply").display()
+    );
+    Scene::load_str(&xml, Path::new("mesh_attribute.xml"), &[]).unwrap()
+}
+
+#[test]
+fn mesh_attributes() {
+    let mut scene = mesh_attribute_scene();
+    for key in ["floor.vertex_color", "gem.face_color"] {
         check(&mut scene, key);
     }
 }

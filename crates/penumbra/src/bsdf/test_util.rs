@@ -84,6 +84,8 @@ pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
         area_scale: R::cst(1.0),
         shape: 0,
         prim: 0,
+        vertices: [0; 3],
+        bary: V2::zero(),
     }
 }
 

@@ -74,6 +74,8 @@ pub(crate) fn surface_si<R: Real>(
         area_scale: R::cst(1.0),
         shape,
         prim,
+        vertices: [0; 3],
+        bary: V2::zero(),
     }
 }
 

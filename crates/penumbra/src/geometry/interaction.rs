@@ -99,6 +99,10 @@ pub struct SurfaceInteraction<R> {
     pub area_scale: R,
     pub shape: u32,
     pub prim: u32,
+    /// On a triangle: its vertex indices and the barycentrics `(b1, b2)`
+    /// of the point (for mesh attributes); zero on other shapes.
+    pub vertices: [u32; 3],
+    pub bary: V2<R>,
 }
 
 impl<R: Real> SurfaceInteraction<R> {

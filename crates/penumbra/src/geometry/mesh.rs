@@ -48,6 +48,30 @@ pub struct MeshData {
     pub normals: Option<Vec<Vec3>>,
     pub texcoords: Option<Vec<Vec2>>,
     pub faces: Vec<[u32; 3]>,
+    /// Extra per-vertex or per-face values (vertex colours...).
+    pub attributes: Vec<MeshAttribute>,
+}
+
+/// A named per-vertex or per-face attribute as read from a file:
+/// `channels` values per vertex (or face), row-major.
+#[derive(Clone, Debug)]
+pub struct MeshAttribute {
+    /// Mitsuba's name: `vertex_<name>` or `face_<name>`.
+    pub name: String,
+    pub channels: usize,
+    pub per_face: bool,
+    pub data: Vec<f32>,
+}
+
+/// A mesh attribute in the parameter store, `<key>.<name>` shaped
+/// `[n, channels]` (Mitsuba's traverse key for it), read by the
+/// `mesh_attribute` texture.
+#[derive(Clone, Debug)]
+pub struct AttributeParam {
+    pub name: String,
+    pub id: ParamId,
+    pub channels: usize,
+    pub per_face: bool,
 }
 
 /// Options of the mesh plugins (`ply`, `obj`, `rectangle`, `cube`).
@@ -84,6 +108,9 @@ pub struct Mesh {
     pub positions: ParamId,
     pub normals: Option<ParamId>,
     pub texcoords: Option<ParamId>,
+    /// Boxed slice rather than Vec: keeps `Shape::Mesh` from outgrowing
+    /// the other shape variants (clippy's large_enum_variant).
+    pub attributes: Box<[AttributeParam]>,
     /// `<key>.to_world` (`[4, 4]`, row-major): the transform the vertices
     /// were placed by; setting it moves them (and the normals) by the
     /// change, and its derivative moves them likewise.
@@ -172,6 +199,25 @@ impl Mesh {
             }
         }
         let nv = data.positions.len();
+        for a in &data.attributes {
+            let n = if a.per_face { data.faces.len() } else { nv };
+            if a.data.len() != n * a.channels {
+                return Err(err(format!(
+                    "attribute '{}' has {} values for {n} {} of {} channels",
+                    a.name,
+                    a.data.len(),
+                    if a.per_face { "faces" } else { "vertices" },
+                    a.channels
+                )));
+            }
+            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+                return Err(err(format!(
+                    "attribute '{}' has a non-finite value at {}",
+                    a.name,
+                    i / a.channels
+                )));
+            }
+        }
         for (f, face) in data.faces.iter().enumerate() {
             if let Some(&bad) = face.iter().find(|&&i| i as usize >= nv) {
                 return Err(err(format!(
@@ -192,7 +238,14 @@ impl Mesh {
             }
         }
         let n_read = data.faces.len();
-        let skipped = remove_degenerate_faces(&mut data.faces, &data.positions);
+        let (skipped, kept) = remove_degenerate_faces(&mut data.faces, &data.positions);
+        for a in data.attributes.iter_mut().filter(|a| a.per_face) {
+            let c = a.channels;
+            a.data = kept
+                .iter()
+                .flat_map(|&f| a.data[f * c..(f + 1) * c].iter().copied())
+                .collect();
+        }
         let non_manifold_edges = count_non_manifold_edges(&data.faces);
         let mut notes = Vec::new();
         if skipped.zero_area > 0 {
@@ -261,6 +314,26 @@ impl Mesh {
             )?),
             None => None,
         };
+        let attributes = data
+            .attributes
+            .into_iter()
+            .map(|a| {
+                let n = a.data.len() / a.channels;
+                let id = store.add(
+                    format!("{key}.{}", a.name),
+                    a.data,
+                    vec![n, a.channels],
+                    ParamFlags::DIFFERENTIABLE,
+                    Domain::Finite,
+                )?;
+                Ok(AttributeParam {
+                    name: a.name,
+                    id,
+                    channels: a.channels,
+                    per_face: a.per_face,
+                })
+            })
+            .collect::<Result<Box<[_]>>>()?;
         let vertex_faces = if normals.is_some() {
             VertexFaces::new(nv, &data.faces)
         } else {
@@ -277,6 +350,7 @@ impl Mesh {
             positions,
             normals,
             texcoords,
+            attributes,
             face_normals: opts.face_normals,
             flip_normals: opts.flip_normals,
             skipped,
@@ -622,6 +696,8 @@ impl Mesh {
             area_scale,
             shape: hit.shape,
             prim: hit.prim,
+            vertices: idx.map(|i| i as u32),
+            bary: V2::new(b1, b2),
         }
     }
 }
@@ -689,10 +765,13 @@ pub fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
 /// vertex index) and the faces that repeat an earlier one (the same vertex
 /// set), and counts, with them, the faces of zero area at `positions`
 /// (which stay).
-fn remove_degenerate_faces(faces: &mut Vec<[u32; 3]>, positions: &[Vec3]) -> SkippedFaces {
+fn remove_degenerate_faces(
+    faces: &mut Vec<[u32; 3]>,
+    positions: &[Vec3],
+) -> (SkippedFaces, Vec<usize>) {
     let mut skipped = SkippedFaces::default();
     let mut seen = std::collections::HashSet::with_capacity(faces.len());
-    faces.retain(|&[a, b, c]| {
+    let mut keep = |&[a, b, c]: &[u32; 3]| {
         if a == b || b == c || a == c {
             skipped.zero_area += 1;
             return false;
@@ -708,8 +787,11 @@ fn remove_degenerate_faces(faces: &mut Vec<[u32; 3]>, positions: &[Vec3]) -> Ski
             skipped.zero_area += 1;
         }
         true
-    });
-    skipped
+    };
+    // the indices of the kept faces, to filter the face attributes alike
+    let kept: Vec<usize> = (0..faces.len()).filter(|&f| keep(&faces[f])).collect();
+    *faces = kept.iter().map(|&f| faces[f]).collect();
+    (skipped, kept)
 }
 
 /// Number of edges shared by more than two faces.
@@ -816,6 +898,7 @@ mod tests {
             normals: None,
             texcoords: None,
             faces: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+            attributes: Vec::new(),
         }
     }
 
@@ -831,6 +914,43 @@ mod tests {
             &mut store,
         )?;
         Ok((m, store))
+    }
+
+    /// Face attributes follow the faces that are kept; they and vertex
+    /// attributes become parameters `<key>.<name>` shaped `[n, channels]`.
+    #[test]
+    fn attributes_become_parameters_and_follow_kept_faces() {
+        let mut d = tet();
+        // a repeated index (removed) and a duplicate of face 0 (removed)
+        d.faces.insert(1, [0, 0, 1]);
+        d.faces.push([2, 1, 0]);
+        d.attributes = vec![
+            MeshAttribute {
+                name: "face_id".into(),
+                channels: 1,
+                per_face: true,
+                data: vec![0.0, 9.0, 1.0, 2.0, 3.0, 9.0],
+            },
+            MeshAttribute {
+                name: "vertex_color".into(),
+                channels: 3,
+                per_face: false,
+                data: vec![0.5; 12],
+            },
+        ];
+        let (m, store) = build(d.clone()).unwrap();
+        assert_eq!(m.face_count(), 4);
+        let id = store.require("m.face_id").unwrap();
+        assert_eq!(store.data(id), &[0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(store.get(id).shape, vec![4, 1]);
+        let id = store.require("m.vertex_color").unwrap();
+        assert_eq!(store.get(id).shape, vec![4, 3]);
+        d.attributes[1].data.pop();
+        let e = build(d).unwrap_err().to_string();
+        assert!(
+            e.contains("test.ply") && e.contains("'vertex_color' has 11 values"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -130,6 +130,7 @@ pub fn read_serialized(
             normals: normals.map(vec3s),
             texcoords: texcoords.map(|t| t.chunks_exact(2).map(Vec2::from_slice).collect()),
             faces,
+            attributes: Vec::new(),
         },
         name: String::from_utf8_lossy(&name).into_owned(),
         has_colors: flags & HAS_COLORS != 0,

@@ -129,6 +129,10 @@ impl<R: Real> V2<R> {
         V2::new(R::cst(v.x), R::cst(v.y))
     }
     #[inline(always)]
+    pub fn zero() -> Self {
+        V2::new(R::cst(0.0), R::cst(0.0))
+    }
+    #[inline(always)]
     pub fn val(self) -> Vec2 {
         Vec2::new(self.x.val(), self.y.val())
     }

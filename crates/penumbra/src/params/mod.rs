@@ -9,6 +9,7 @@
 
 use crate::ad::Real;
 use crate::error::Error;
+use crate::geometry::mesh::AttributeParam;
 use crate::math::V3;
 use std::collections::HashMap;
 use std::fmt;
@@ -121,11 +122,38 @@ pub struct Param {
 pub struct ParamStore {
     params: Vec<Param>,
     by_key: HashMap<String, ParamId>,
+    /// The mesh attributes of each shape (by shape index): where the
+    /// `mesh_attribute` texture finds the values of the shape it is
+    /// evaluated on.
+    shape_attributes: Vec<Vec<AttributeParam>>,
 }
 
 impl ParamStore {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Records the mesh attributes of shape `shape`.
+    pub fn set_shape_attributes(&mut self, shape: u32, attributes: Vec<AttributeParam>) {
+        let i = shape as usize;
+        if self.shape_attributes.len() <= i {
+            self.shape_attributes.resize(i + 1, Vec::new());
+        }
+        self.shape_attributes[i] = attributes;
+    }
+
+    /// Attribute `name` of shape `shape`, if it has one.
+    #[inline]
+    pub fn shape_attribute(&self, shape: u32, name: &str) -> Option<&AttributeParam> {
+        self.shape_attributes
+            .get(shape as usize)?
+            .iter()
+            .find(|a| a.name == name)
+    }
+
+    /// The mesh attributes of all shapes.
+    pub fn shape_attributes(&self) -> impl Iterator<Item = &AttributeParam> {
+        self.shape_attributes.iter().flatten()
     }
 
     /// Adds a parameter. Keys must be unique; values must be in `domain`.

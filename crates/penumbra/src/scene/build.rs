@@ -11,6 +11,7 @@ use crate::geometry::Shape;
 use crate::integrator::{Integrator, PathIntegrator};
 use crate::math::DiscreteDistribution;
 use crate::sensor::Sensor;
+use crate::texture::MeshAttribute;
 use std::collections::HashMap;
 use std::rc::Rc;
 
@@ -18,6 +19,9 @@ use std::rc::Rc;
 struct Builder {
     ctx: LoadContext,
     bsdfs: Vec<Bsdf>,
+    /// The `mesh_attribute` textures of each BSDF, checked against every
+    /// shape using it.
+    bsdf_attribute_uses: Vec<Vec<MeshAttribute>>,
     bsdf_of_node: HashMap<*const Node, u32>,
     shapes: Vec<Shape>,
     shape_info: Vec<ShapeInfo>,
@@ -44,6 +48,8 @@ impl Builder {
         let b = Bsdf::from_node(node, &mut self.ctx)?;
         node.check_all_used()?;
         self.bsdfs.push(b);
+        self.bsdf_attribute_uses
+            .push(std::mem::take(&mut self.ctx.attribute_uses));
         Ok(self.bsdfs.len() as u32 - 1)
     }
 
@@ -99,6 +105,19 @@ impl Builder {
             None => None,
         };
         node.check_all_used()?;
+        // the area emitter's textures are evaluated on this shape too
+        let emitter_uses = std::mem::take(&mut self.ctx.attribute_uses);
+        for t in self.bsdf_attribute_uses[bsdf as usize]
+            .iter()
+            .chain(&emitter_uses)
+        {
+            t.check_shape(&shape, &node.key)?;
+        }
+        if let Some(m) = shape.as_mesh() {
+            self.ctx
+                .store
+                .set_shape_attributes(index, m.attributes.to_vec());
+        }
         self.shapes.push(shape);
         self.shape_info.push(ShapeInfo {
             key: node.key.clone(),
@@ -139,6 +158,7 @@ impl Scene {
                 ..LoadContext::default()
             },
             bsdfs: Vec::new(),
+            bsdf_attribute_uses: Vec::new(),
             bsdf_of_node: HashMap::new(),
             shapes: Vec::new(),
             shape_info: Vec::new(),
@@ -161,6 +181,9 @@ impl Scene {
                 }
                 Class::Emitter => {
                     b.emitter(&node, None)?;
+                    if let Some(t) = b.ctx.attribute_uses.first() {
+                        return Err(t.outside_mesh_error());
+                    }
                 }
                 Class::Sensor => b.sensors.push(Sensor::from_node(&node, &mut b.ctx.store)?),
                 Class::Integrator => {

@@ -25,6 +25,9 @@ pub struct LoadContext {
     /// parameters exist once in the store).
     pub(crate) shared_bsdfs: HashMap<*const Node, Bsdf>,
     pub(crate) shared_textures: HashMap<*const Node, Texture>,
+    /// `mesh_attribute` textures built (or reused) since the builder last
+    /// took them: it checks them against the shape they are used on.
+    pub(crate) attribute_uses: Vec<crate::texture::MeshAttribute>,
     /// Where relative file names are searched (the main scene file's
     /// folder and `<path>`s; see [`FileResolver`]).
     pub resolver: FileResolver,

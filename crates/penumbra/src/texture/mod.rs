@@ -4,12 +4,14 @@
 
 pub mod bitmap;
 mod checkerboard;
+mod mesh_attribute;
 mod uniform;
 
 pub use bitmap::{Bitmap, FilterType, WrapMode};
 #[cfg(test)]
 pub(crate) use checkerboard::EVALS as CHECKERBOARD_EVALS;
 pub use checkerboard::{Checkerboard, MITSUBA_EVAL1_SWAPS_COLORS};
+pub use mesh_attribute::MeshAttribute;
 pub use uniform::Uniform;
 
 use crate::ad::Real;
@@ -38,6 +40,7 @@ pub enum Texture {
     Uniform(Uniform),
     Bitmap(Bitmap),
     Checkerboard(Checkerboard),
+    MeshAttribute(MeshAttribute),
 }
 
 impl TextureT for Texture {
@@ -47,6 +50,7 @@ impl TextureT for Texture {
             Texture::Uniform(t) => t.eval(store, si),
             Texture::Bitmap(t) => t.eval(store, si),
             Texture::Checkerboard(t) => t.eval(store, si),
+            Texture::MeshAttribute(t) => t.eval(store, si),
         }
     }
     #[inline]
@@ -55,6 +59,7 @@ impl TextureT for Texture {
             Texture::Uniform(t) => t.eval_1(store, si),
             Texture::Bitmap(t) => t.eval_1(store, si),
             Texture::Checkerboard(t) => t.eval_1(store, si),
+            Texture::MeshAttribute(t) => t.eval_1(store, si),
         }
     }
     fn mean(&self, store: &ParamStore) -> f32 {
@@ -62,6 +67,7 @@ impl TextureT for Texture {
             Texture::Uniform(t) => t.mean(store),
             Texture::Bitmap(t) => t.mean(store),
             Texture::Checkerboard(t) => t.mean(store),
+            Texture::MeshAttribute(t) => t.mean(store),
         }
     }
     fn max(&self, store: &ParamStore) -> f32 {
@@ -69,6 +75,7 @@ impl TextureT for Texture {
             Texture::Uniform(t) => t.max(store),
             Texture::Bitmap(t) => t.max(store),
             Texture::Checkerboard(t) => t.max(store),
+            Texture::MeshAttribute(t) => t.max(store),
         }
     }
 }
@@ -128,23 +135,37 @@ impl Texture {
     /// its first use.
     pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Texture> {
         let shared = node.id.is_some().then_some(node as *const Node);
-        if let Some(t) = shared.and_then(|p| ctx.shared_textures.get(&p)) {
-            return Ok(t.clone());
+        let t = match shared.and_then(|p| ctx.shared_textures.get(&p)) {
+            Some(t) => t.clone(),
+            None => {
+                let t = Texture::new(node, domain, ctx)?;
+                if let Some(p) = shared {
+                    ctx.shared_textures.insert(p, t.clone());
+                }
+                t
+            }
+        };
+        // every use, shared or not: the builder checks each shape using it
+        if let Texture::MeshAttribute(m) = &t {
+            ctx.attribute_uses.push(m.clone());
         }
+        Ok(t)
+    }
+
+    fn new(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Texture> {
         let t = match node.plugin.as_str() {
             "bitmap" => Texture::Bitmap(Bitmap::from_node(node, domain, ctx)?),
             "checkerboard" => Texture::Checkerboard(Checkerboard::from_node(node, domain, ctx)?),
+            "mesh_attribute" => Texture::MeshAttribute(MeshAttribute::from_node(node)?),
             _ => {
                 return Err(node.error(format!(
-                    "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard)",
+                    "unknown texture plugin '{}' (Penumbra has: bitmap, checkerboard, \
+                     mesh_attribute)",
                     node.plugin
                 )))
             }
         };
         node.check_all_used()?;
-        if let Some(p) = shared {
-            ctx.shared_textures.insert(p, t.clone());
-        }
         Ok(t)
     }
 }
@@ -165,6 +186,8 @@ pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
         area_scale: R::cst(1.0),
         shape: 0,
         prim: 0,
+        vertices: [0; 3],
+        bary: V2::zero(),
     }
 }
 

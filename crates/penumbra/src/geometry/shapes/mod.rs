@@ -74,5 +74,7 @@ pub(crate) fn analytic_interaction<R: Real>(
         area_scale,
         shape: hit.shape,
         prim: hit.prim,
+        vertices: [0; 3],
+        bary: V2::zero(),
     }
 }

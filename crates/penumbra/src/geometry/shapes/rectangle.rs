@@ -33,6 +33,7 @@ pub fn rectangle_data(mirror: bool) -> MeshData {
             Vec2::new(0.0, 1.0),
         ]),
         faces,
+        attributes: Vec::new(),
     }
 }
 
