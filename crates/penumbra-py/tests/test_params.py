@@ -151,5 +151,8 @@ def test_scalar_for_one_element_parameters():
     key = [k for k in p.keys() if k.endswith("alpha.value")][0]
     p[key] = 0.3
     np.testing.assert_allclose(p[key], [0.3])
-    with pytest.raises(pn.ParamError, match="> 0"):
-        p[key] = 0.0
+    # alpha = 0 is allowed (clamped to 1e-4 when rendering, as Mitsuba
+    # does); a negative roughness is not
+    p[key] = 0.0
+    with pytest.raises(pn.ParamError, match=">= 0"):
+        p[key] = -0.1
