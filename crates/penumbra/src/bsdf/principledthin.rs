@@ -371,26 +371,7 @@ mod tests {
     /// `pdf`, from both sides.
     #[test]
     fn matches_mitsuba_values() {
-        for &(name, wi, wo, f_ref, p_ref) in PRINCIPLEDTHIN_REF {
-            let (b, store) = build("principledthin", &case(name));
-            let (wi, wo) = (Vec3::from(wi), Vec3::from(wo));
-            let f = eval_f32(&b, &store, wi, wo);
-            let p = pdf_f32(&b, &store, wi, wo);
-            for c in 0..3 {
-                assert!(
-                    (f[c] - f_ref[c]).abs() <= 2e-5 * f_ref[c].abs() + 1e-7,
-                    "{name} {wi:?} {wo:?}: {f} vs {f_ref:?}"
-                );
-            }
-            assert!(
-                (p - p_ref).abs() <= 2e-5 * p_ref + 1e-7,
-                "{name} {wi:?} {wo:?}: pdf {p} vs {p_ref}"
-            );
-            let d = b
-                .context(&store.primal(), &si::<Dual>(wi))
-                .eval(V3::cst(wo));
-            assert_eq!([d.x.v, d.y.v, d.z.v], [f.x, f.y, f.z]);
-        }
+        assert_matches_mitsuba("principledthin", PRINCIPLEDTHIN_REF, case);
     }
 
     #[test]
@@ -460,9 +441,8 @@ mod tests {
     }
 
     /// (case, wi, wo, eval rgb, pdf) from Mitsuba 3.9.1.
-    type RefRow = (&'static str, [f32; 3], [f32; 3], [f32; 3], f32);
     #[allow(clippy::excessive_precision)]
-    const PRINCIPLEDTHIN_REF: &[RefRow] = &[
+    const PRINCIPLEDTHIN_REF: &[MitsubaRow] = &[
         (
             "A",
             [0.3144854510165755, 0.10482848367219183, 0.9434563530497265],
