@@ -108,7 +108,7 @@ impl ImageBlock {
 
     /// Calls `f(i, j, w)` for every pixel `(i, j)` of this block that the
     /// filter centred on the continuous position `(px, py)` reaches with
-    /// weight `w > 0` (pixel `(i, j)` spans `[i, i+1) × [j, j+1)`).
+    /// weight `w ≠ 0` (negative lobes included; pixel `(i, j)` spans `[i, i+1) × [j, j+1)`).
     #[inline]
     pub fn footprint(
         &self,
@@ -220,7 +220,7 @@ impl ImageBlock {
         out.fill(0.0);
         self.footprint(filter, px, py, |i, j, w| {
             let total = self.data[self.offset(i, j) + self.channels];
-            if total > 0.0 {
+            if total != 0.0 {
                 let k = ((j - self.y0) as usize * self.width + (i - self.x0) as usize) * c;
                 let s = (w / total) as f32;
                 for (o, d) in out.iter_mut().zip(&d_image[k..k + c]) {
@@ -252,14 +252,15 @@ impl ImageBlock {
         }
     }
 
-    /// Weighted means per pixel (zero where no sample reached), as f32
+    /// Weighted means per pixel (zero where the weights sum to zero), as f32
     /// row-major `height × width × channels`.
     pub fn develop(&self) -> Vec<f32> {
         let stride = self.channels + 1;
         let mut out = Vec::with_capacity(self.width * self.height * self.channels);
         for px in self.data.chunks_exact(stride) {
             let w = px[self.channels];
-            let inv = if w > 0.0 { 1.0 / w } else { 0.0 };
+            // a weight sum may be negative (filters with negative lobes)
+            let inv = if w != 0.0 { 1.0 / w } else { 0.0 };
             out.extend(px[..self.channels].iter().map(|v| (v * inv) as f32));
         }
         out
