@@ -197,6 +197,7 @@ impl Scene {
                 Class::Medium | Class::Phase | Class::Volume => {
                     unreachable!("refused by refuse_media")
                 }
+                Class::Spectrum => unreachable!("spectra are property values"),
                 Class::Film | Class::Rfilter | Class::Sampler | Class::Scene => {
                     return Err(node.error(format!(
                         "a <{}> belongs inside a <sensor> (or <film>), not at the top level",

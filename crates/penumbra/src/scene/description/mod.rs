@@ -10,6 +10,7 @@
 mod props;
 mod resolver;
 pub mod spectrum;
+mod spectrum_plugin;
 mod upgrade;
 pub mod xml;
 

@@ -26,6 +26,10 @@ pub enum Class {
     Medium,
     Phase,
     Volume,
+    /// A spectrum plugin (`<spectrum type="…">`): read as a property and
+    /// converted to its value while the XML is read, never an object of
+    /// the tree, so [`Class::from_tag`] does not name it.
+    Spectrum,
 }
 
 impl Class {
@@ -62,6 +66,7 @@ impl Class {
             Class::Medium => "medium",
             Class::Phase => "phase",
             Class::Volume => "volume",
+            Class::Spectrum => "spectrum",
         }
     }
 }

@@ -82,18 +82,43 @@ pub fn constant_to_rgb(value: f32, usage: SpectrumUse) -> Vec3 {
 /// nm, at least two), and whether it had to be clamped into range.
 pub fn samples_to_rgb(wavelengths: &[f64], values: &[f64], usage: SpectrumUse) -> (Vec3, bool) {
     debug_assert!(wavelengths.len() == values.len() && wavelengths.len() >= 2);
-    let tables = tables();
     let (first, last) = (wavelengths[0], wavelengths[wavelengths.len() - 1]);
-    let mut xyz = [0.0f64; 3];
-    for i in 0..STEPS {
-        let w = CIE_MIN + i as f64 / (STEPS - 1) as f64 * (CIE_MAX - CIE_MIN);
+    let linear = |w: f64| {
         if w < first || w > last {
-            continue;
+            return 0.0;
         }
         // the segment [w0, w1] of the spectrum that holds w
         let k = wavelengths[1..wavelengths.len() - 1].partition_point(|&x| x <= w);
         let (w0, w1, v0, v1) = (wavelengths[k], wavelengths[k + 1], values[k], values[k + 1]);
-        let v = v0 + (v1 - v0) * (w - w0) / (w1 - w0);
+        v0 + (v1 - v0) * (w - w0) / (w1 - w0)
+    };
+    to_rgb(linear, usage)
+}
+
+/// Planck's law: the spectral radiance of a black body at `temperature`
+/// kelvin, at wavelength `w` nm, in W/(m²·sr·nm), as Mitsuba 3's
+/// `blackbody` spectrum evaluates it (its constants c, h, k, CODATA 2014).
+pub fn planck(temperature: f64, w: f64) -> f64 {
+    const C: f64 = 2.997_924_58e8;
+    const H: f64 = 6.626_070_04e-34;
+    const K: f64 = 1.380_648_52e-23;
+    let lambda = w * 1e-9;
+    let per_metre =
+        2.0 * H * C * C / (lambda.powi(5) * ((H * C / (lambda * K * temperature)).exp() - 1.0));
+    per_metre * 1e-9
+}
+
+/// The RGB colour of the spectrum `s(λ)` (λ in nm), and whether it had to
+/// be clamped into range: the integral of the module comment.
+pub fn to_rgb(s: impl Fn(f64) -> f64, usage: SpectrumUse) -> (Vec3, bool) {
+    let tables = tables();
+    let mut xyz = [0.0f64; 3];
+    for i in 0..STEPS {
+        let w = CIE_MIN + i as f64 / (STEPS - 1) as f64 * (CIE_MAX - CIE_MIN);
+        let v = s(w);
+        if v == 0.0 {
+            continue;
+        }
         let (cmf, d65) = tables.at(w);
         let illuminant = match usage {
             SpectrumUse::Emission => 1.0,

@@ -19,6 +19,7 @@
 use super::props::{Class, Node, Prop, Value};
 use super::resolver::FileResolver;
 use super::spectrum::{self, SpectrumUse};
+use super::spectrum_plugin;
 use super::upgrade::{self, Version};
 use crate::error::{Error, Result, SrcLoc};
 use crate::math::Transform;
@@ -708,11 +709,7 @@ fn property(c: &Elem, in_emitter: bool, resolver: &FileResolver) -> Result<(Stri
         _ => &["name", "value"],
     };
     if let (Some(t), "spectrum") = (c.attr("type"), c.tag.as_str()) {
-        return Err(c.err(format!(
-            "{}: spectrum plugins (type '{t}') are not supported yet; give the value as \
-             <rgb>, a constant, wavelength:value pairs or an .spd file",
-            c.describe()
-        )));
+        return spectrum_plugin(c, t, in_emitter, resolver);
     }
     c.check_attrs(allowed)?;
     let name = c.req_attr("name")?.to_string();
@@ -807,13 +804,49 @@ fn spectrum(c: &Elem, in_emitter: bool, resolver: &FileResolver) -> Result<Value
     spectrum::check_samples(&wavelengths).map_err(|m| c.err(format!("{}: {m}", c.describe())))?;
     let (rgb, clamped) = spectrum::samples_to_rgb(&wavelengths, &values, usage);
     if clamped {
-        crate::warn::warn(format!(
-            "{}: {}: the spectrum's colour is outside the sRGB gamut; clamped to {rgb} (as Mitsuba)",
-            c.loc,
-            c.describe()
-        ));
+        warn_clamped(c, rgb);
     }
     Ok(Value::Rgb(rgb))
+}
+
+/// `<spectrum type="…" name="…">` with its parameters as child
+/// properties: a spectrum plugin, converted by
+/// [`super::spectrum_plugin`].
+fn spectrum_plugin(
+    c: &Elem,
+    plugin: &str,
+    in_emitter: bool,
+    resolver: &FileResolver,
+) -> Result<(String, Value)> {
+    c.check_attrs(&["name", "type"])?;
+    let name = c.req_attr("name")?.to_string();
+    let mut node = Node::new(Class::Spectrum, plugin, None, name.clone(), c.loc.clone());
+    for p in &c.children {
+        if !PROPERTY_TAGS.contains(&p.tag.as_str()) || p.tag == "spectrum" {
+            return Err(p.err(format!(
+                "{} cannot contain <{}>; a spectrum plugin's parameters are <float>, \
+                 <string> or <rgb> properties",
+                c.describe(),
+                p.tag
+            )));
+        }
+        let (pname, value) = property(p, false, resolver)?;
+        push_prop(&mut node, Prop::new(pname, value, p.loc.clone()))?;
+    }
+    let (value, clamped) = spectrum_plugin::to_value(&node, SpectrumUse::of(&name, in_emitter))?;
+    if let (true, Value::Rgb(rgb)) = (clamped, &value) {
+        warn_clamped(c, *rgb);
+    }
+    Ok((name, value))
+}
+
+/// Warns that the colour of spectrum `c` was clamped into range.
+fn warn_clamped(c: &Elem, rgb: Vec3) {
+    crate::warn::warn(format!(
+        "{}: {}: the spectrum's colour is outside the sRGB gamut; clamped to {rgb} (as Mitsuba)",
+        c.loc,
+        c.describe()
+    ));
 }
 
 /// `value="400:0.1, 500:0.5"`: wavelengths (nm) and values.
@@ -1351,6 +1384,67 @@ mod tests {
         s.check_all_used().unwrap();
     }
 
+    /// Spectrum plugins: grey and RGB values as Mitsuba 3.9.1's scalar_rgb
+    /// variant loads them (`mi.traverse`); blackbody, regular and irregular
+    /// emission as its llvm_ad_spectral variant renders them (a constant
+    /// environment seen by a 1-pixel camera, 4 × 2²⁰ samples, whose
+    /// standard errors are below 0.03 % of the values). Ours is the
+    /// 1000-wavelength sum of Mitsuba's parser, whose error grows where a
+    /// spectrum is cut off inside the visible range: 0.5 % in blue for a
+    /// blackbody cut at 450 nm.
+    #[test]
+    fn spectrum_plugins_become_values_as_in_mitsuba() {
+        let root = parse(&format!(
+            "{HEAD}<bsdf type=\"diffuse\" id=\"b\">\n\
+               <spectrum type=\"uniform\" name=\"reflectance\"><float name=\"value\" value=\"0.5\"/></spectrum>\n\
+               <spectrum type=\"d65\" name=\"alpha\"><float name=\"scale\" value=\"0.2\"/></spectrum>\n\
+               <spectrum type=\"d65\" name=\"specular_reflectance\"><rgb name=\"color\" value=\"0.2, 0.5, 0.8\"/><float name=\"scale\" value=\"0.5\"/></spectrum>\n\
+               <spectrum type=\"srgb\" name=\"diffuse_reflectance\"><rgb name=\"color\" value=\"0.2, 0.5, 0.8\"/></spectrum>\n\
+             </bsdf>\n\
+             <emitter type=\"constant\" id=\"e\">\n\
+               <spectrum type=\"uniform\" name=\"u\"><float name=\"value\" value=\"0.5\"/></spectrum>\n\
+               <spectrum type=\"d65\" name=\"d\"/>\n\
+               <spectrum type=\"blackbody\" name=\"bb3000\"><float name=\"temperature\" value=\"3000\"/></spectrum>\n\
+               <spectrum type=\"blackbody\" name=\"bb6500\"><float name=\"temperature\" value=\"6500\"/>\
+                 <float name=\"wavelength_min\" value=\"450\"/><float name=\"wavelength_max\" value=\"650\"/></spectrum>\n\
+               <spectrum type=\"regular\" name=\"reg\"><float name=\"wavelength_min\" value=\"400\"/>\
+                 <float name=\"wavelength_max\" value=\"700\"/><string name=\"values\" value=\"0.1, 0.5, 0.9\"/></spectrum>\n\
+               <spectrum type=\"irregular\" name=\"irr\"><string name=\"wavelengths\" value=\"400, 500, 700\"/>\
+                 <string name=\"values\" value=\"0.1 0.5 0.9\"/></spectrum>\n\
+             </emitter></scene>"
+        ))
+        .unwrap();
+        let (b, e) = (child(&root, "b"), child(&root, "e"));
+        let grey = |n: &Node, name: &str| match n.prop(name).unwrap().value {
+            Value::Spectrum(v) => v,
+            ref v => panic!("{name}: {v:?}"),
+        };
+        let rgb = |n: &Node, name: &str| match n.prop(name).unwrap().value {
+            Value::Rgb(v) => v,
+            ref v => panic!("{name}: {v:?}"),
+        };
+        assert_eq!(grey(&b, "reflectance"), 0.5);
+        assert_eq!(grey(&b, "alpha"), 0.2);
+        assert_eq!(rgb(&b, "specular_reflectance"), Vec3::new(0.1, 0.25, 0.4));
+        assert_eq!(rgb(&b, "diffuse_reflectance"), Vec3::new(0.2, 0.5, 0.8));
+        // unlike <spectrum value="0.5"/>, grey inside an emitter too
+        assert_eq!(grey(&e, "u"), 0.5);
+        assert_eq!(grey(&e, "d"), 1.0);
+        for (name, mitsuba, tolerance) in [
+            ("bb3000", [733.81726, 349.90588, 112.79073], 2e-3),
+            ("bb6500", [36898.863, 44767.926, 20138.336], 6e-3),
+            ("reg", [0.8730664, 0.4591739, 0.18145032], 2e-3),
+            ("irr", [0.9188228, 0.5660357, 0.24179433], 2e-3),
+        ] {
+            let ours = rgb(&e, name);
+            let err = (ours - Vec3::from(mitsuba)).abs() / Vec3::from(mitsuba);
+            assert!(
+                err.max_element() < tolerance,
+                "{name}: {ours}, Mitsuba {mitsuba:?}"
+            );
+        }
+    }
+
     #[test]
     fn spectra_become_rgb_as_in_mitsuba() {
         // expected values: Mitsuba 3.9.1 (scalar_rgb) loading the same XML
@@ -1636,7 +1730,32 @@ mod tests {
             (
                 "<scene version=\"3.0.0\">\n<emitter type=\"x\">\n<spectrum type='blackbody' name='radiance'/></emitter></scene>",
                 3,
-                &["type 'blackbody'", "not supported yet"],
+                &["spectrum 'blackbody'", "missing required parameter 'temperature'"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<emitter type=\"x\">\n<spectrum type='blackbody' name='radiance'>\n<float name='temperature' value='3000'/>\n<float name='scale' value='2'/></spectrum></emitter></scene>",
+                5,
+                &["spectrum 'blackbody'", "unknown parameter 'scale'"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum type='srgb' name='reflectance'>\n<rgb name='color' value='1.5, 0.2, 0.2'/></spectrum></bsdf></scene>",
+                4,
+                &["parameter 'color'", "must lie in [0, 1]"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum type='irregular' name='reflectance'>\n<string name='wavelengths' value='400, 500'/>\n<string name='values' value='0.1, 0.5, 3'/></spectrum></bsdf></scene>",
+                5,
+                &["parameter 'values'", "3 values for 2 wavelengths"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum type='regular' name='reflectance'>\n<float name='wavelength_min' value='400'/>\n<string name='values' value='0.1, 0.5'/></spectrum></bsdf></scene>",
+                3,
+                &["spectrum 'regular'", "missing required parameter 'wavelength_max'"],
+            ),
+            (
+                "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum type='cie1931' name='reflectance'/></bsdf></scene>",
+                3,
+                &["unknown spectrum plugin 'cie1931'"],
             ),
             (
                 "<scene version=\"3.0.0\">\n<bsdf type=\"x\">\n<spectrum name='r' filename='r.csv'/></bsdf></scene>",
