@@ -1,25 +1,30 @@
 //! Mitsuba's `spot` emitter: a point light restricted to a cone, with a
-//! linear falloff between the beam width and the cutoff angle.
+//! linear falloff between the beam width and the cutoff angle, optionally
+//! modulated by a texture projected through the cone.
 
-use super::{delta_light_queries, emission_prop, eval_uniform, point_light_sample};
+use super::{delta_light_queries, emission_prop, eval_uniform, point_light_sample, surface_si};
 use super::{EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::Shape;
-use crate::math::{Transform, V3};
-use crate::params::ParamView;
+use crate::math::{Transform, V2, V3};
+use crate::params::{Domain, ParamView};
 use crate::scene::{LoadContext, Node};
-use crate::texture::Texture;
+use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// Intensity `intensity` (key `<key>.intensity.value`) emitted from the
 /// origin of `to_world` around its local +z axis: full within
 /// `beam_width` (degrees, default ¾ of the cutoff), falling linearly in
 /// angle to zero at `cutoff_angle` (degrees, default 20), as Mitsuba 3's
-/// `spot`.
+/// `spot`. An optional `texture` (spatially varying, keys
+/// `<key>.texture.…`) multiplies the intensity: it is projected through
+/// the cone, the edge of the cutoff cone touching the edges of its unit
+/// uv square.
 #[derive(Clone, Debug)]
 pub struct Spot {
     pub intensity: Texture,
+    pub texture: Option<Texture>,
     pub to_world: Transform,
     /// Cutoff angle in radians.
     pub cutoff: f32,
@@ -39,8 +44,19 @@ impl Spot {
             ));
         }
         let beam_deg = node.float_checked("beam_width", cutoff_deg * 0.75, false)?;
+        let texture = match node.prop("texture") {
+            None => None,
+            Some(p) => match Texture::from_prop(node, "texture", None, Channels::Rgb, Domain::NonNegative, ctx)? {
+                // as Mitsuba, which refuses a constant there
+                Texture::Uniform(_) => {
+                    return Err(node.prop_error(p, "must be a spatially varying texture (e.g. a bitmap); give a constant as 'intensity'"))
+                }
+                t => Some(t),
+            },
+        };
         Ok(Spot {
             intensity,
+            texture,
             to_world: node.transform("to_world")?,
             cutoff: cutoff_deg.to_radians(),
             beam_width: beam_deg.to_radians(),
@@ -61,6 +77,17 @@ impl Spot {
         ((R::cst(self.cutoff) - cos_theta.clamp(-1.0, 1.0).acos())
             / (self.cutoff - self.beam_width))
             .clamp(0.0, 1.0)
+    }
+
+    /// The texture's uv for an emitted direction `local` (in the light's
+    /// frame, z > 0): the direction's slopes x/z, y/z over tan(cutoff),
+    /// mapped from [−1, 1] to [0, 1], as Mitsuba's `spot` maps them.
+    pub fn direction_to_uv<R: Real>(&self, local: V3<R>) -> V2<R> {
+        let k = local.z * self.cutoff.tan();
+        V2::new(
+            R::cst(0.5) + R::cst(0.5) * local.x / k,
+            R::cst(0.5) + R::cst(0.5) * local.y / k,
+        )
     }
 }
 
@@ -84,7 +111,12 @@ impl EmitterT for Spot {
         if !(f.val() > 0.0) {
             return None;
         }
-        let i = eval_uniform::<R>(&self.intensity, store);
+        let mut i = eval_uniform::<R>(&self.intensity, store);
+        if let Some(texture) = &self.texture {
+            let mut si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
+            si.uv = self.direction_to_uv(local);
+            i = i.mul_elem(texture.eval(store, &si));
+        }
         Some(EmitterSample {
             ds,
             d,
@@ -143,6 +175,42 @@ mod tests {
                 (r, w) => panic!("{deg}°: got {r:?}, want {w:?}"),
             }
         }
+    }
+
+    /// Mitsuba's `direction_to_uv`: the cutoff cone meets the edges of
+    /// the unit uv square; a constant `texture` is refused, as Mitsuba
+    /// refuses it.
+    #[test]
+    fn texture_uv_and_constant_texture_refused() {
+        let n = node("spot", "s", vec![("cutoff_angle", Value::Float(30.0))]);
+        let s = Spot::from_node(&n, &mut LoadContext::default()).unwrap();
+        let (c, t) = (30f32.to_radians().cos(), 30f32.to_radians().sin());
+        for (local, want) in [
+            (Vec3::Z, [0.5, 0.5]),
+            (Vec3::new(t, 0.0, c), [1.0, 0.5]),
+            (Vec3::new(0.0, -t, c), [0.5, 0.0]),
+            (
+                Vec3::new(-0.1, 0.2, 1.0).normalize(),
+                [
+                    0.5 - 0.05 / 30f32.to_radians().tan(),
+                    0.5 + 0.1 / 30f32.to_radians().tan(),
+                ],
+            ),
+        ] {
+            let uv = s.direction_to_uv::<f32>(V3::cst(local));
+            assert!(
+                (uv.x - want[0]).abs() < 1e-5 && (uv.y - want[1]).abs() < 1e-5,
+                "{local}: {uv:?}"
+            );
+        }
+        let n = node("spot", "s", vec![("texture", Value::Rgb(Vec3::ONE))]);
+        let e = Spot::from_node(&n, &mut LoadContext::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("'texture'") && e.contains("spatially varying"),
+            "{e}"
+        );
     }
 
     #[test]
