@@ -1,4 +1,4 @@
-//! The boundary term of the shadows of point, spot and directional
+//! The boundary term of the shadows of point, spot, projector and directional
 //! emitters, in forward and reverse mode (budget `sppi`, with the term of
 //! [`super::shadow_boundary`]).
 //!
@@ -49,7 +49,7 @@ use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
 /// Whether this pass estimates the term: a pinhole or orthographic camera,
-/// a point, spot or directional emitter, a lit first vertex and a budget
+/// a point, spot, projector or directional emitter, a lit first vertex and a budget
 /// that is not zero (as [`super::shadow_boundary::applies`]).
 pub(crate) fn applies(scene: &Scene, opts: &RenderOptions) -> Result<bool> {
     let primal = scene.params.primal();

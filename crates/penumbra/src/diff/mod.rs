@@ -46,7 +46,7 @@ pub(crate) struct BoundaryTerms {
     pub primary: bool,
     /// Edges seen from the first vertex: shadows ([`shadow_boundary`]).
     pub shadow: bool,
-    /// Shadows of point, spot and directional emitters
+    /// Shadows of point, spot, projector and directional emitters
     /// ([`delta_shadow_boundary`]).
     pub delta_shadow: bool,
 }

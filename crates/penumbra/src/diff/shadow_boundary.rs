@@ -60,7 +60,7 @@
 //! weight through them on a tape of a few dozen nodes, so that both modes
 //! take the same samples and agree up to rounding.
 //!
-//! Not handled here: shadows of point, spot and directional emitters (their
+//! Not handled here: shadows of point, spot, projector and directional emitters (their
 //! shadow edges are curves on the film, not on the sphere of directions),
 //! visibility at the second and later vertices of a path, the silhouettes
 //! of analytic shapes (spheres, disks, cylinders), an emitter's own outline against

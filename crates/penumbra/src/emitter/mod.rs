@@ -6,6 +6,7 @@ mod constant;
 mod directional;
 mod envmap;
 mod point;
+mod projector;
 mod spot;
 
 pub use area::Area;
@@ -13,6 +14,7 @@ pub use constant::Constant;
 pub use directional::Directional;
 pub use envmap::Envmap;
 pub use point::Point;
+pub use projector::Projector;
 pub use spot::Spot;
 
 use crate::ad::Real;
@@ -119,7 +121,7 @@ pub(crate) fn vec3_or_to_world(
     }
 }
 
-/// The direction sample of a light at the point `p` (point, spot) seen
+/// The direction sample of a light at the point `p` (point, spot, projector) seen
 /// from `ref_p`: unit direction and distance to `p`, pdf 1, delta, no
 /// normal; with the direction and squared distance (for the inverse-square
 /// falloff) in `R`, following the reference point and the light. `None`
@@ -223,7 +225,7 @@ pub struct DirectionSample {
     pub dist: f32,
     /// Solid-angle density (for delta emitters: 1).
     pub pdf: f32,
-    /// True for emitters that cannot be hit by rays (point, spot,
+    /// True for emitters that cannot be hit by rays (point, spot, projector,
     /// directional): no MIS with BSDF sampling.
     pub delta: bool,
 }
@@ -257,7 +259,7 @@ pub trait EmitterT {
     /// emitters; zero for others), in `R`: the direction follows the camera
     /// or a specular chain when they move.
     fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R>;
-    /// True for point, spot and directional emitters.
+    /// True for point, spot, projector and directional emitters.
     fn is_delta(&self) -> bool;
     /// True for constant and envmap emitters.
     fn is_environment(&self) -> bool;
@@ -269,6 +271,7 @@ pub enum Emitter {
     Area(Area),
     Point(Point),
     Spot(Spot),
+    Projector(Projector),
     Directional(Directional),
     Constant(Constant),
     Envmap(Envmap),
@@ -280,6 +283,7 @@ macro_rules! dispatch {
             Emitter::Area($e) => $body,
             Emitter::Point($e) => $body,
             Emitter::Spot($e) => $body,
+            Emitter::Projector($e) => $body,
             Emitter::Directional($e) => $body,
             Emitter::Constant($e) => $body,
             Emitter::Envmap($e) => $body,
@@ -335,12 +339,15 @@ pub enum DeltaOrigin<R> {
 }
 
 impl Emitter {
-    /// The origin of a point, spot or directional emitter's light, in `R`
+    /// The origin of a point, spot, projector or directional emitter's light, in `R`
     /// (a point light's `position` is a parameter); `None` for the others.
     pub(crate) fn delta_origin<R: Real>(&self, store: &ParamView) -> Option<DeltaOrigin<R>> {
         match self {
             Emitter::Point(p) => Some(DeltaOrigin::Point(store.read3(p.position, 0))),
             Emitter::Spot(s) => Some(DeltaOrigin::Point(V3::cst(s.to_world.point(Vec3::ZERO)))),
+            Emitter::Projector(p) => {
+                Some(DeltaOrigin::Point(V3::cst(p.to_world.point(Vec3::ZERO))))
+            }
             Emitter::Directional(d) => Some(DeltaOrigin::Direction(d.direction)),
             _ => None,
         }
@@ -375,12 +382,13 @@ impl Emitter {
             }
             "point" => Emitter::Point(Point::from_node(node, ctx)?),
             "spot" => Emitter::Spot(Spot::from_node(node, ctx)?),
+            "projector" => Emitter::Projector(Projector::from_node(node, ctx)?),
             "directional" => Emitter::Directional(Directional::from_node(node, ctx)?),
             "constant" => Emitter::Constant(Constant::from_node(node, ctx)?),
             "envmap" => Emitter::Envmap(Envmap::from_node(node, ctx)?),
             _ => {
                 return Err(node.error(format!(
-                    "unknown emitter plugin '{}' (Penumbra has: area, point, spot, directional, constant, envmap)",
+                    "unknown emitter plugin '{}' (Penumbra has: area, point, spot, projector, directional, constant, envmap)",
                     node.plugin
                 )))
             }
