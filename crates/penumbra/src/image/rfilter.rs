@@ -204,9 +204,18 @@ mod tests {
     #[test]
     fn bad_filter_parameters_are_errors_naming_them() {
         for (xml, needle) in [
-            ("<rfilter type=\"lanczos\"><integer name=\"lobes\" value=\"0\"/></rfilter>", "lobes"),
-            ("<rfilter type=\"catmullrom\"><float name=\"B\" value=\"0.3\"/></rfilter>", "B"),
-            ("<rfilter type=\"mitchell\"><float name=\"radius\" value=\"3\"/></rfilter>", "radius"),
+            (
+                "<rfilter type=\"lanczos\"><integer name=\"lobes\" value=\"0\"/></rfilter>",
+                "lobes",
+            ),
+            (
+                "<rfilter type=\"catmullrom\"><float name=\"B\" value=\"0.3\"/></rfilter>",
+                "B",
+            ),
+            (
+                "<rfilter type=\"mitchell\"><float name=\"radius\" value=\"3\"/></rfilter>",
+                "radius",
+            ),
         ] {
             let e = parse(xml).unwrap_err().to_string();
             assert!(e.contains(needle) && e.contains(":1"), "{xml}: {e}");
