@@ -120,11 +120,13 @@ mod tests {
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
     use crate::scene::Value;
+    use std::f32::consts::TAU;
 
     /// Mitsuba 3.9.1's `sample_direction` weights (scalar_rgb) of a
     /// projector at the origin looking down +z, irradiance (1, 2, 3),
-    /// scale 2, fov 40; `None` where Mitsuba's weight is 0 (outside the
-    /// image, behind the projector).
+    /// scale 2, fov 40 (on the axis at distance 1: 2π·(1, 2, 3), which
+    /// Mitsuba prints as 6.28319, 12.5664, 18.8496); `None` where
+    /// Mitsuba's weight is 0 (outside the image, behind the projector).
     #[test]
     fn weights_match_mitsuba() {
         let mut ctx = LoadContext::default();
@@ -139,7 +141,7 @@ mod tests {
         );
         let e = Emitter::from_node(&n, None, &mut ctx).unwrap();
         for (p, want) in [
-            ([0.0, 0.0, 1.0], Some([6.28319, 12.5664, 18.8496])),
+            ([0.0, 0.0, 1.0], Some([TAU, 2.0 * TAU, 3.0 * TAU])),
             ([0.2, 0.1, 2.0], Some([1.58058, 3.16117, 4.74175])),
             ([-0.3, 0.2, 3.0], Some([0.703156, 1.40631, 2.10947])),
             ([0.5, 0.0, 1.0], None),
