@@ -71,9 +71,14 @@ const LEAF: u32 = 0x8000_0000;
 const EMPTY: u32 = u32::MAX;
 /// Subtrees with at most this many primitives become one leaf.
 const LEAF_SIZE: u32 = 4;
-/// Traversal stack entries kept on the machine stack; deeper trees use a
-/// heap stack (see [`Accel::stack_size`]).
+/// Traversal stack entries kept on the machine stack; a tree that needs
+/// more (see [`Accel::stack_size`]) gets a heap stack of its exact size,
+/// chosen once per ray.
 const STACK: usize = 96;
+/// Ize 2013 ("Robust BVH Ray Traversal", JCGT 2(2)): rounding the far slab
+/// distance `(b - o) · (1/d)` up by this factor keeps the box test
+/// conservative (no box a ray touches is missed, flat boxes included).
+const FAR_ROUND_UP: f32 = 1.0 + 4.0 * f32::EPSILON;
 
 /// A 4-wide BVH node: the boxes of its four children as structure of
 /// arrays (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child)
@@ -96,20 +101,24 @@ struct Tri4 {
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     ng: [Vec4; 3],
-    /// Per lane: index of the primitive in build order (`Accel::prims`).
-    id: [u32; 4],
+    /// Per lane: shape index and primitive index within the shape (read
+    /// from the packet, which is in cache, rather than from a table).
+    shape: [u32; 4],
+    prim: [u32; 4],
     /// Lanes (bit k: lane k) holding analytic primitives.
     analytic: u32,
     /// Another packet of the same leaf follows this one.
     more: bool,
 }
 
-/// The ray as traversal uses it: splatted origin and inverse direction,
-/// and which box side (min/max) is the near one per axis.
+/// The ray as traversal uses it: splatted origin and inverse direction
+/// (for the far slab, rounded up once per ray, see [`FAR_ROUND_UP`]), and
+/// which box side (min/max) is the near one per axis.
 struct TRay {
     o: [Vec4; 3],
     d: [Vec4; 3],
     inv: [Vec4; 3],
+    inv_far: [Vec4; 3],
     near: [usize; 3],
 }
 
@@ -120,6 +129,7 @@ impl TRay {
         // the min side as near, consistently
         let d = ray.d + Vec3::ZERO;
         let inv = d.recip();
+        let inv_far = inv * FAR_ROUND_UP;
         TRay {
             o: [
                 Vec4::splat(ray.o.x),
@@ -128,6 +138,11 @@ impl TRay {
             ],
             d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            inv_far: [
+                Vec4::splat(inv_far.x),
+                Vec4::splat(inv_far.y),
+                Vec4::splat(inv_far.z),
+            ],
             near: [
                 (inv.x < 0.0) as usize,
                 (inv.y < 0.0) as usize,
@@ -136,20 +151,26 @@ impl TRay {
         }
     }
 
-    /// Which children of `n` the ray overlaps on `[tmin, tmax]` (bit k:
-    /// child k), and the entry distances. Slab distances that are NaN
-    /// (a zero direction component with the origin on a box plane) do not
-    /// constrain the interval; the far distance is widened by a few ulps so
-    /// that rounding cannot miss flat boxes (Ize 2013, "Robust BVH Ray
-    /// Traversal").
+    /// Which children of `n` the ray overlaps on `[tmin, tmax_far]` (bit
+    /// k: child k), and the entry distances; `tmax_far` is the ray's tmax
+    /// rounded up by [`FAR_ROUND_UP`], as the far slabs are. Slab distances
+    /// that are NaN (a zero direction component with the origin on a box
+    /// plane) do not constrain the interval.
+    ///
+    /// The slabs are `(b - o) · inv`, not one FMA `b · inv - o · inv` with
+    /// `o · inv` precomputed: the rounding of `o · inv` is relative to the
+    /// origin's coordinates, not to the distance, and is not covered by a
+    /// relative factor for rays that start near a box (shadow and bounce
+    /// rays leave a surface 1e-4 away), so the FMA form is not
+    /// conservative (Ize 2013, section 3).
     #[inline(always)]
-    fn hit_node(&self, n: &Node4, tmin: f32, tmax: f32) -> (u32, Vec4) {
-        let slab = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv[a];
+    fn hit_node(&self, n: &Node4, tmin: f32, tmax_far: f32) -> (u32, Vec4) {
+        let near = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv[a];
+        let far = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv_far[a];
         let [nx, ny, nz] = self.near;
         // `max(x, acc)`/`min(x, acc)` keep `acc` when x is NaN (SSE order)
-        let t0 = slab(0, nx).max(slab(1, ny).max(slab(2, nz).max(Vec4::splat(tmin))));
-        let t1 = slab(0, 1 - nx).min(slab(1, 1 - ny).min(slab(2, 1 - nz).min(Vec4::splat(tmax))));
-        let t1 = t1 * (1.0 + 4.0 * f32::EPSILON);
+        let t0 = near(0, nx).max(near(1, ny).max(near(2, nz).max(Vec4::splat(tmin))));
+        let t1 = far(0, 1 - nx).min(far(1, 1 - ny).min(far(2, 1 - nz).min(Vec4::splat(tmax_far))));
         (t0.cmple(t1).bitmask(), t0)
     }
 
@@ -194,50 +215,81 @@ impl TRay {
     }
 }
 
-/// A traversal stack of `(node, entry distance)` on the machine stack
-/// (with a heap fallback for unusually deep trees).
-struct Stack {
-    buf: [MaybeUninit<(u32, f32)>; STACK],
-    heap: Vec<(u32, f32)>,
+/// A traversal stack of `(node, entry distance)` over a buffer of at
+/// least [`Accel::stack_size`] entries (on the machine stack, or on the
+/// heap for unusually deep trees: chosen once per ray, not per push).
+struct Stack<'a> {
+    buf: &'a mut [MaybeUninit<(u32, f32)>],
     len: usize,
-    on_heap: bool,
 }
 
-impl Stack {
+impl<'a> Stack<'a> {
     #[inline(always)]
-    fn new(size: usize) -> Stack {
-        let on_heap = size > STACK;
-        Stack {
-            buf: [const { MaybeUninit::uninit() }; STACK],
-            heap: if on_heap {
-                Vec::with_capacity(size)
-            } else {
-                Vec::new()
-            },
-            len: 0,
-            on_heap,
-        }
+    fn new(buf: &'a mut [MaybeUninit<(u32, f32)>]) -> Stack<'a> {
+        Stack { buf, len: 0 }
     }
     #[inline(always)]
     fn push(&mut self, e: (u32, f32)) {
-        if self.on_heap {
-            self.heap.push(e);
-        } else {
-            self.buf[self.len] = MaybeUninit::new(e);
-            self.len += 1;
-        }
+        debug_assert!(self.len < self.buf.len());
+        // SAFETY: the buffer holds `Accel::stack_size` entries, the most a
+        // traversal of this tree can hold at once (bounded in
+        // `Accel::finish` from the tree's depth), so `len` stays in bounds.
+        unsafe { *self.buf.get_unchecked_mut(self.len) = MaybeUninit::new(e) };
+        self.len += 1;
     }
     #[inline(always)]
     fn pop(&mut self) -> Option<(u32, f32)> {
-        if self.on_heap {
-            return self.heap.pop();
-        }
         if self.len == 0 {
             return None;
         }
         self.len -= 1;
-        // SAFETY: entries below `len` were written by `push`.
-        Some(unsafe { self.buf[self.len].assume_init() })
+        // SAFETY: entries below `len` were written by `push`, and `len` is
+        // within the buffer (see `push`).
+        Some(unsafe { self.buf.get_unchecked(self.len).assume_init() })
+    }
+}
+
+/// Runs `f` with a stack buffer of at least `size` entries: on the machine
+/// stack when [`STACK`] suffices, else on the heap.
+#[inline(always)]
+fn with_stack<T>(size: usize, f: impl FnOnce(Stack) -> T) -> T {
+    if size <= STACK {
+        f(Stack::new(&mut [const { MaybeUninit::uninit() }; STACK]))
+    } else {
+        f(Stack::new(&mut vec![MaybeUninit::uninit(); size]))
+    }
+}
+
+/// The closest hit so far of a closest-hit traversal.
+struct Closest {
+    tmax: f32,
+    /// `tmax` rounded up as the far slabs are (see [`TRay::hit_node`]).
+    tmax_far: f32,
+    best: Option<Hit>,
+}
+
+impl Closest {
+    #[inline(always)]
+    fn new(tmax: f32) -> Closest {
+        Closest {
+            tmax,
+            tmax_far: tmax * FAR_ROUND_UP,
+            best: None,
+        }
+    }
+    /// Keeps the hit at `t` of lane `j` of `p` if it is the closest yet.
+    #[inline(always)]
+    fn offer(&mut self, t: f32, p: &Tri4, j: usize, uv: Vec2) {
+        if t < self.tmax {
+            self.tmax = t;
+            self.tmax_far = t * FAR_ROUND_UP;
+            self.best = Some(Hit {
+                t,
+                shape: p.shape[j],
+                prim: p.prim[j],
+                uv,
+            });
+        }
     }
 }
 
@@ -526,11 +578,13 @@ impl Accel {
             .map(|(ids, more)| {
                 let mut lanes = [[Vec3::ZERO; 4]; 4];
                 let mut analytic = 0u32;
+                let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
                 for (k, &id) in ids.iter().enumerate() {
                     if id == u32::MAX {
                         continue;
                     }
                     let [s, p] = self.prims[id as usize];
+                    (shape[k], prim[k]) = (s, p);
                     match &shapes[s as usize] {
                         // a zero-area face keeps zero edges, like an
                         // unused lane: never hit (see geometry::mesh)
@@ -559,7 +613,8 @@ impl Accel {
                     e1: soa(1),
                     e2: soa(2),
                     ng: soa(3),
-                    id: *ids,
+                    shape,
+                    prim,
                     analytic,
                     more,
                 }
@@ -572,12 +627,32 @@ impl Accel {
         self.prims.len()
     }
 
-    /// The analytic primitive of packet lane `id` (a build-order index).
+    /// The analytic primitive of shape `shape`.
     #[inline(never)]
-    fn analytic_hit(&self, id: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
-        let s = self.prims[id as usize][0];
-        let a = &self.analytic[self.analytic_of_shape[s as usize] as usize];
+    fn analytic_hit(&self, shape: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
+        let a = &self.analytic[self.analytic_of_shape[shape as usize] as usize];
         a.intersect(ray.o, ray.d, tmin, tmax)
+    }
+
+    /// Node `i`, a child index read from the tree.
+    #[inline(always)]
+    fn node(&self, i: u32) -> &Node4 {
+        debug_assert!((i as usize) < self.nodes.len());
+        // SAFETY: `i` is node 0 (the tree is not empty when traversed) or a
+        // non-leaf, non-empty child slot, which `Collapse::node` set to
+        // the index of a node it pushed.
+        unsafe { self.nodes.get_unchecked(i as usize) }
+    }
+
+    /// Leaf packet `i`: the first of a leaf (its child slot without the
+    /// `LEAF` bit) or one after a packet with `more` set.
+    #[inline(always)]
+    fn packet(&self, i: usize) -> &Tri4 {
+        debug_assert!(i < self.tris.len());
+        // SAFETY: `Collapse::child` pushes a leaf's packets consecutively
+        // and stores the index of its first one; `more` is set on all but
+        // the last, so every index reached is below `tris.len()`.
+        unsafe { self.tris.get_unchecked(i) }
     }
 
     /// The closest hit on the open interval `(ray.tmin, ray.tmax)`.
@@ -587,31 +662,46 @@ impl Accel {
         if self.nodes.is_empty() {
             return None;
         }
+        with_stack(self.stack_size, |stack| self.intersect_with(ray, stack))
+    }
+
+    #[inline(always)]
+    fn intersect_with(&self, ray: &Ray, mut stack: Stack) -> Option<Hit> {
         let tr = TRay::new(ray);
         let tmin = ray.tmin;
-        let mut tmax = ray.tmax;
-        let mut best = u32::MAX;
-        let (mut bu, mut bv) = (0.0f32, 0.0f32);
-        let mut stack = Stack::new(self.stack_size);
+        let mut c = Closest::new(ray.tmax);
         stack.push((0, tmin));
         while let Some((mut cur, t_enter)) = stack.pop() {
-            if t_enter > tmax {
+            if t_enter > c.tmax {
                 continue;
             }
             // descend, nearest child first, the others onto the stack
             while cur & LEAF == 0 {
-                let n = &self.nodes[cur as usize];
-                let (mask, t0) = tr.hit_node(n, tmin, tmax);
+                let n = self.node(cur);
+                let (mask, t0) = tr.hit_node(n, tmin, c.tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
                 }
                 let first = mask.trailing_zeros() as usize;
-                if mask & (mask - 1) == 0 {
+                let rest = mask & (mask - 1);
+                if rest == 0 {
                     cur = n.child[first];
                     continue;
                 }
                 let t0 = t0.to_array();
+                if rest & (rest - 1) == 0 {
+                    // two children, the common case: no sort
+                    let second = rest.trailing_zeros() as usize;
+                    let (near, far) = if t0[second] < t0[first] {
+                        (second, first)
+                    } else {
+                        (first, second)
+                    };
+                    stack.push((n.child[far], t0[far]));
+                    cur = n.child[near];
+                    continue;
+                }
                 let mut hits = [(0u32, 0f32); 4];
                 let mut k = 0;
                 let mut m = mask;
@@ -638,33 +728,23 @@ impl Accel {
             }
             let mut pi = (cur & !LEAF) as usize;
             loop {
-                let p = &self.tris[pi];
-                let (mask, t, u, v) = tr.hit_tris(p, tmin, tmax);
+                let p = self.packet(pi);
+                let (mask, t, u, v) = tr.hit_tris(p, tmin, c.tmax);
                 if mask != 0 {
                     let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
                     let mut m = mask;
                     while m != 0 {
                         let j = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        if t[j] < tmax {
-                            tmax = t[j];
-                            best = p.id[j];
-                            bu = u[j];
-                            bv = v[j];
-                        }
+                        c.offer(t[j], p, j, Vec2::new(u[j], v[j]));
                     }
                 }
                 let mut m = p.analytic;
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let t = self.analytic_hit(p.id[j], ray, tmin, tmax);
-                    if t < tmax {
-                        tmax = t;
-                        best = p.id[j];
-                        bu = 0.0;
-                        bv = 0.0;
-                    }
+                    let t = self.analytic_hit(p.shape[j], ray, tmin, c.tmax);
+                    c.offer(t, p, j, Vec2::ZERO);
                 }
                 if !p.more {
                     break;
@@ -672,16 +752,7 @@ impl Accel {
                 pi += 1;
             }
         }
-        if best == u32::MAX {
-            return None;
-        }
-        let [shape, prim] = self.prims[best as usize];
-        Some(Hit {
-            t: tmax,
-            shape,
-            prim,
-            uv: Vec2::new(bu, bv),
-        })
+        c.best
     }
 
     /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
@@ -690,14 +761,19 @@ impl Accel {
         if self.nodes.is_empty() {
             return false;
         }
+        with_stack(self.stack_size, |stack| self.occluded_with(ray, stack))
+    }
+
+    #[inline(always)]
+    fn occluded_with(&self, ray: &Ray, mut stack: Stack) -> bool {
         let tr = TRay::new(ray);
         let (tmin, tmax) = (ray.tmin, ray.tmax);
-        let mut stack = Stack::new(self.stack_size);
+        let tmax_far = tmax * FAR_ROUND_UP;
         stack.push((0, tmin));
         while let Some((mut cur, _)) = stack.pop() {
             while cur & LEAF == 0 {
-                let n = &self.nodes[cur as usize];
-                let (mut mask, _) = tr.hit_node(n, tmin, tmax);
+                let n = self.node(cur);
+                let (mut mask, _) = tr.hit_node(n, tmin, tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -716,7 +792,7 @@ impl Accel {
             }
             let mut pi = (cur & !LEAF) as usize;
             loop {
-                let p = &self.tris[pi];
+                let p = self.packet(pi);
                 if tr.hit_tris(p, tmin, tmax).0 != 0 {
                     return true;
                 }
@@ -724,7 +800,7 @@ impl Accel {
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if self.analytic_hit(p.id[j], ray, tmin, tmax) < tmax {
+                    if self.analytic_hit(p.shape[j], ray, tmin, tmax) < tmax {
                         return true;
                     }
                 }
