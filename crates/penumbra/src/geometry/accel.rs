@@ -1,15 +1,22 @@
-//! The acceleration structure: a 4-wide BVH over all primitives of all
+//! The acceleration structure: a wide BVH over all primitives of all
 //! shapes (every triangle of every mesh, and one primitive per analytic
 //! shape: sphere, disk), laid out for SIMD traversal on the CPU in the
 //! manner of Embree (Wald et al. 2014, "Embree: A Kernel Framework for
-//! Efficient CPU Ray Tracing"): each node holds the boxes of its four
-//! children as structure-of-arrays, tested against one ray at once, and
-//! each leaf holds up to four triangles as one packet (`v0`, `e1 = v0 -
-//! v1`, `e2 = v2 - v0`, `ng = e1 × e2` per lane), also tested at once.
+//! Efficient CPU Ray Tracing"): each node holds the boxes of its children
+//! as structure-of-arrays, tested against one ray at once, and each leaf
+//! holds up to four triangles as one packet (`v0`, `e1 = v0 - v1`, `e2 =
+//! v2 - v0`, `ng = e1 × e2` per lane), also tested at once.
+//!
+//! Nodes are 8-wide (one 256-bit AVX box test per node) when the CPU has
+//! AVX, detected at run time ([`Width::detect`]), else 4-wide (SSE on
+//! x86-64, glam's portable `Vec4` elsewhere): one build runs on every
+//! machine. Wider nodes halve the number of node visits per ray on
+//! incoherent rays (Wald, Benthin, Boulos 2008, "Getting Rid of Packets";
+//! Embree's BVH8).
 //!
 //! The tree is built as a binary BVH by PLOC with reinsertion (the `obvhs`
-//! crate), then collapsed to four-wide nodes (opening the child of largest
-//! surface area until four children are gathered; subtrees of at most four
+//! crate), then collapsed to wide nodes (opening the child of largest
+//! surface area until the node is full; subtrees of at most four
 //! primitives become leaves). Triangles are two-sided (no backface
 //! culling). Analytic primitives sit in the packets as lanes flagged in a
 //! mask (zero edges), handled off the hot path.
@@ -80,14 +87,134 @@ const STACK: usize = 96;
 /// conservative (no box a ray touches is missed, flat boxes included).
 const FAR_ROUND_UP: f32 = 1.0 + 4.0 * f32::EPSILON;
 
-/// A 4-wide BVH node: the boxes of its four children as structure of
-/// arrays (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child)
-/// and the children (node index, `LEAF | packet index`, or `EMPTY`).
+/// Children per BVH node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Width {
+    #[default]
+    Four,
+    Eight,
+}
+
+impl Width {
+    /// The widest the running CPU traverses with SIMD: eight with AVX.
+    pub fn detect() -> Width {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            return Width::Eight;
+        }
+        Width::Four
+    }
+}
+
+/// A `W`-wide BVH node: the boxes of its children as structure of arrays
+/// (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child) and the
+/// children (node index, `LEAF | packet index`, or `EMPTY`, whose box is
+/// empty).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-struct Node4 {
-    b: [[Vec4; 3]; 2],
-    child: [u32; 4],
+struct Node<const W: usize> {
+    b: [[[f32; W]; 3]; 2],
+    child: [u32; W],
+}
+
+impl<const W: usize> Node<W> {
+    const EMPTY: Node<W> = Node {
+        b: [[[f32::INFINITY; W]; 3], [[f32::NEG_INFINITY; W]; 3]],
+        child: [EMPTY; W],
+    };
+
+    fn set(&mut self, slot: usize, child: u32, bb: &Aabb) {
+        self.child[slot] = child;
+        for a in 0..3 {
+            self.b[0][a][slot] = bb.min[a];
+            self.b[1][a][slot] = bb.max[a];
+        }
+    }
+}
+
+/// The box test of a node against one ray.
+trait BoxTest<const W: usize> {
+    /// Which children the ray overlaps on `[tmin, tmax_far]` (bit k: child
+    /// k), and the entry distances; see [`TRay::hit_node`].
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; W]);
+}
+
+impl BoxTest<4> for Node<4> {
+    #[inline(always)]
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 4]) {
+        let (mask, t0) = tr.hit_node(self, tmin, tmax_far);
+        (mask, t0.to_array())
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BoxTest<8> for Node<8> {
+    #[inline(always)]
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 8]) {
+        // SAFETY: 8-wide trees exist only on CPUs with AVX
+        // (`Accel::build_with_width` caps the width at `Width::detect`).
+        unsafe { hit_node8(self, tr, tmin, tmax_far) }
+    }
+}
+
+/// [`TRay::hit_node`] for eight children: the same arithmetic in the same
+/// order on 256-bit registers (`_mm256_max_ps(x, acc)` keeps `acc` when x
+/// is NaN, as SSE does).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+fn hit_node8(n: &Node<8>, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 8]) {
+    use std::arch::x86_64::*;
+    // SAFETY: each pointer is to an array of eight f32 (unaligned loads).
+    let b = |side: usize, a: usize| unsafe { _mm256_loadu_ps(n.b[side][a].as_ptr()) };
+    let near = |a: usize| {
+        let o = _mm256_set1_ps(tr.o[a].x);
+        let inv = _mm256_set1_ps(tr.inv[a].x);
+        _mm256_mul_ps(_mm256_sub_ps(b(tr.near[a], a), o), inv)
+    };
+    let far = |a: usize| {
+        let o = _mm256_set1_ps(tr.o[a].x);
+        let inv = _mm256_set1_ps(tr.inv_far[a].x);
+        _mm256_mul_ps(_mm256_sub_ps(b(1 - tr.near[a], a), o), inv)
+    };
+    let t0 = _mm256_max_ps(
+        near(0),
+        _mm256_max_ps(near(1), _mm256_max_ps(near(2), _mm256_set1_ps(tmin))),
+    );
+    let t1 = _mm256_min_ps(
+        far(0),
+        _mm256_min_ps(far(1), _mm256_min_ps(far(2), _mm256_set1_ps(tmax_far))),
+    );
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    let mut out = [0.0; 8];
+    // SAFETY: `out` holds eight f32 (unaligned store).
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t0) };
+    (mask, out)
+}
+
+/// The nodes of the tree, at the width chosen at build time; the root is
+/// node 0.
+#[derive(Clone, Debug)]
+enum Nodes {
+    Four(Vec<Node<4>>),
+    #[cfg(target_arch = "x86_64")]
+    Eight(Vec<Node<8>>),
+}
+
+impl Default for Nodes {
+    fn default() -> Nodes {
+        Nodes::Four(Vec::new())
+    }
+}
+
+impl Nodes {
+    fn len(&self) -> usize {
+        match self {
+            Nodes::Four(n) => n.len(),
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(n) => n.len(),
+        }
+    }
 }
 
 /// Up to four primitives of a leaf, laid out for one SIMD intersection
@@ -164,9 +291,10 @@ impl TRay {
     /// rays leave a surface 1e-4 away), so the FMA form is not
     /// conservative (Ize 2013, section 3).
     #[inline(always)]
-    fn hit_node(&self, n: &Node4, tmin: f32, tmax_far: f32) -> (u32, Vec4) {
-        let near = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv[a];
-        let far = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv_far[a];
+    fn hit_node(&self, n: &Node<4>, tmin: f32, tmax_far: f32) -> (u32, Vec4) {
+        let b = |side: usize, a: usize| Vec4::from_array(n.b[side][a]);
+        let near = |a: usize, side: usize| (b(side, a) - self.o[a]) * self.inv[a];
+        let far = |a: usize, side: usize| (b(side, a) - self.o[a]) * self.inv_far[a];
         let [nx, ny, nz] = self.near;
         // `max(x, acc)`/`min(x, acc)` keep `acc` when x is NaN (SSE order)
         let t0 = near(0, nx).max(near(1, ny).max(near(2, nz).max(Vec4::splat(tmin))));
@@ -260,6 +388,16 @@ fn with_stack<T>(size: usize, f: impl FnOnce(Stack) -> T) -> T {
     }
 }
 
+/// Node `i` of `nodes`, a child index read from the tree.
+#[inline(always)]
+fn node<const W: usize>(nodes: &[Node<W>], i: u32) -> &Node<W> {
+    debug_assert!((i as usize) < nodes.len());
+    // SAFETY: `i` is node 0 (traversal starts only on a non-empty tree) or
+    // a non-leaf, non-empty child slot, which `Collapse::node` set to the
+    // index of a node it pushed.
+    unsafe { nodes.get_unchecked(i as usize) }
+}
+
 /// The closest hit so far of a closest-hit traversal.
 struct Closest {
     tmax: f32,
@@ -293,18 +431,52 @@ impl Closest {
     }
 }
 
-/// Collapses the binary BVH `bvh2` into 4-wide nodes and leaf packets.
-struct Collapse<'a> {
+/// Collapses the binary BVH `bvh2` into `W`-wide nodes and leaf packets.
+struct Collapse<'a, const W: usize> {
     bvh2: &'a Bvh2,
     /// Primitives below each binary node.
     count: Vec<u32>,
-    nodes: Vec<Node4>,
+    nodes: Vec<Node<W>>,
     leaves: Vec<[u32; 4]>,
     leaf_more: Vec<bool>,
     depth: usize,
 }
 
-impl Collapse<'_> {
+impl<const W: usize> Collapse<'_, W> {
+    fn new(bvh2: &Bvh2) -> Collapse<'_, W> {
+        let mut count = vec![0u32; bvh2.nodes.len()];
+        Self::count(bvh2, 0, &mut count);
+        Collapse {
+            bvh2,
+            count,
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            leaf_more: Vec::new(),
+            depth: 0,
+        }
+    }
+
+    /// Collapses the whole tree: the root is node 0.
+    fn run(mut self) -> Self {
+        if self.bvh2.nodes[0].is_leaf() || self.count[0] <= LEAF_SIZE {
+            // a root leaf: one node with one child
+            let leaf = self.child(0, 1);
+            let mut n = Node::EMPTY;
+            n.set(0, leaf, self.bvh2.nodes[0].aabb());
+            self.nodes.push(n);
+            self.depth = 1;
+        } else {
+            self.node(0, 0);
+        }
+        self
+    }
+
+    /// The most entries a traversal stack holds: each level pushes at
+    /// most `W - 1`.
+    fn stack_size(&self) -> usize {
+        (W - 1) * self.depth + 2
+    }
+
     fn count(bvh2: &Bvh2, i: usize, out: &mut [u32]) -> u32 {
         let n = &bvh2.nodes[i];
         let c = if n.is_leaf() {
@@ -330,7 +502,7 @@ impl Collapse<'_> {
     }
 
     /// The child slot for binary node `i`: a leaf of packets, or a new
-    /// 4-wide node.
+    /// wide node.
     fn child(&mut self, i: usize, depth: usize) -> u32 {
         if self.count[i] <= LEAF_SIZE || self.bvh2.nodes[i].is_leaf() {
             let mut ids = Vec::new();
@@ -350,14 +522,14 @@ impl Collapse<'_> {
         self.node(i, depth)
     }
 
-    /// A 4-wide node for the interior binary node `i`: opens the child of
-    /// largest surface area until four children are gathered.
+    /// A wide node for the interior binary node `i`: opens the child of
+    /// largest surface area until `W` children are gathered.
     fn node(&mut self, i: usize, depth: usize) -> u32 {
         self.depth = self.depth.max(depth + 1);
         let n = &self.bvh2.nodes[i];
         let f = n.first_index as usize;
         let mut kids = vec![f, f + 1];
-        while kids.len() < 4 {
+        while kids.len() < W {
             let open = kids
                 .iter()
                 .enumerate()
@@ -375,23 +547,10 @@ impl Collapse<'_> {
             kids.push(fk + 1);
         }
         let idx = self.nodes.len();
-        self.nodes.push(Node4 {
-            b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
-            child: [EMPTY; 4],
-        });
+        self.nodes.push(Node::EMPTY);
         for (slot, &k) in kids.iter().enumerate() {
             let c = self.child(k, depth + 1);
-            let bb = self.bvh2.nodes[k].aabb();
-            let node = &mut self.nodes[idx];
-            node.child[slot] = c;
-            for a in 0..3 {
-                let mut lo = node.b[0][a].to_array();
-                let mut hi = node.b[1][a].to_array();
-                lo[slot] = bb.min[a];
-                hi[slot] = bb.max[a];
-                node.b[0][a] = Vec4::from_array(lo);
-                node.b[1][a] = Vec4::from_array(hi);
-            }
+            self.nodes[idx].set(slot, c, self.bvh2.nodes[k].aabb());
         }
         idx as u32
     }
@@ -401,8 +560,8 @@ impl Collapse<'_> {
 #[derive(Clone, Default)]
 pub struct Accel {
     bvh2: Bvh2,
-    /// 4-wide nodes; the root is node 0.
-    nodes: Vec<Node4>,
+    width: Width,
+    nodes: Nodes,
     /// Leaf packets.
     tris: Vec<Tri4>,
     /// Traversal stack size the tree needs.
@@ -435,10 +594,18 @@ fn collect_prims(shapes: &[Shape]) -> Vec<[u32; 2]> {
 
 impl Accel {
     /// Builds the acceleration structure over all primitives of `shapes`
-    /// (positions read from `store`).
+    /// (positions read from `store`), as wide as the CPU allows.
     pub fn build(shapes: &[Shape], store: &ParamStore) -> Accel {
+        Accel::build_with_width(shapes, store, Width::detect())
+    }
+
+    /// [`Accel::build`] with nodes of at most `width` children (capped at
+    /// [`Width::detect`]): for tests and benchmarks of the narrower
+    /// kernel.
+    pub fn build_with_width(shapes: &[Shape], store: &ParamStore, width: Width) -> Accel {
         let mut a = Accel {
             prims: collect_prims(shapes),
+            width: width.min(Width::detect()),
             ..Default::default()
         };
         a.refresh_analytic(shapes, store);
@@ -537,41 +704,26 @@ impl Accel {
             .collect()
     }
 
-    /// Derives the 4-wide BVH from the binary one and packs the
-    /// primitives of each leaf.
+    /// Derives the wide BVH from the binary one and packs the primitives
+    /// of each leaf.
     fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
-        let mut count = vec![0u32; self.bvh2.nodes.len()];
-        Collapse::count(&self.bvh2, 0, &mut count);
-        let mut c = Collapse {
-            bvh2: &self.bvh2,
-            count,
-            nodes: Vec::new(),
-            leaves: Vec::new(),
-            leaf_more: Vec::new(),
-            depth: 0,
-        };
-        if self.bvh2.nodes[0].is_leaf() || c.count[0] <= LEAF_SIZE {
-            // a root leaf: one node with one child
-            let leaf = c.child(0, 1);
-            let bb = *self.bvh2.nodes[0].aabb();
-            let mut n = Node4 {
-                b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
-                child: [EMPTY; 4],
-            };
-            n.child[0] = leaf;
-            for a in 0..3 {
-                n.b[0][a].x = bb.min[a];
-                n.b[1][a].x = bb.max[a];
+        let (leaves, more) = match self.width {
+            Width::Four => {
+                let c = Collapse::<4>::new(&self.bvh2).run();
+                self.stack_size = c.stack_size();
+                self.nodes = Nodes::Four(c.nodes);
+                (c.leaves, c.leaf_more)
             }
-            c.nodes.push(n);
-            c.depth = 1;
-        } else {
-            c.node(0, 0);
-        }
-        // each level pushes at most three entries
-        self.stack_size = 3 * c.depth + 2;
-        self.nodes = c.nodes;
-        let (leaves, more) = (c.leaves, c.leaf_more);
+            #[cfg(target_arch = "x86_64")]
+            Width::Eight => {
+                let c = Collapse::<8>::new(&self.bvh2).run();
+                self.stack_size = c.stack_size();
+                self.nodes = Nodes::Eight(c.nodes);
+                (c.leaves, c.leaf_more)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            Width::Eight => unreachable!("Width::detect gives Four off x86-64"),
+        };
         self.tris = leaves
             .iter()
             .zip(more)
@@ -634,16 +786,6 @@ impl Accel {
         a.intersect(ray.o, ray.d, tmin, tmax)
     }
 
-    /// Node `i`, a child index read from the tree.
-    #[inline(always)]
-    fn node(&self, i: u32) -> &Node4 {
-        debug_assert!((i as usize) < self.nodes.len());
-        // SAFETY: `i` is node 0 (the tree is not empty when traversed) or a
-        // non-leaf, non-empty child slot, which `Collapse::node` set to
-        // the index of a node it pushed.
-        unsafe { self.nodes.get_unchecked(i as usize) }
-    }
-
     /// Leaf packet `i`: the first of a leaf (its child slot without the
     /// `LEAF` bit) or one after a packet with `more` set.
     #[inline(always)]
@@ -659,14 +801,34 @@ impl Accel {
     /// For triangles, `Hit::uv` holds the barycentrics `(b1, b2)` of
     /// `p = (1 - b1 - b2) p0 + b1 p1 + b2 p2`.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        if self.nodes.is_empty() {
-            return None;
+        match &self.nodes {
+            Nodes::Four(nodes) if nodes.is_empty() => None,
+            Nodes::Four(nodes) => {
+                with_stack(self.stack_size, |s| self.intersect_with(nodes, ray, s))
+            }
+            // SAFETY: 8-wide trees exist only on CPUs with AVX.
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(nodes) => unsafe { self.intersect_avx(nodes, ray) },
         }
-        with_stack(self.stack_size, |stack| self.intersect_with(ray, stack))
+    }
+
+    /// The 8-wide traversal, compiled for AVX (with the triangle tests).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn intersect_avx(&self, nodes: &[Node<8>], ray: &Ray) -> Option<Hit> {
+        with_stack(self.stack_size, |s| self.intersect_with(nodes, ray, s))
     }
 
     #[inline(always)]
-    fn intersect_with(&self, ray: &Ray, mut stack: Stack) -> Option<Hit> {
+    fn intersect_with<const W: usize>(
+        &self,
+        nodes: &[Node<W>],
+        ray: &Ray,
+        mut stack: Stack,
+    ) -> Option<Hit>
+    where
+        Node<W>: BoxTest<W>,
+    {
         let tr = TRay::new(ray);
         let tmin = ray.tmin;
         let mut c = Closest::new(ray.tmax);
@@ -677,8 +839,8 @@ impl Accel {
             }
             // descend, nearest child first, the others onto the stack
             while cur & LEAF == 0 {
-                let n = self.node(cur);
-                let (mask, t0) = tr.hit_node(n, tmin, c.tmax_far);
+                let n = node(nodes, cur);
+                let (mask, t0) = n.hit(&tr, tmin, c.tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -689,7 +851,6 @@ impl Accel {
                     cur = n.child[first];
                     continue;
                 }
-                let t0 = t0.to_array();
                 if rest & (rest - 1) == 0 {
                     // two children, the common case: no sort
                     let second = rest.trailing_zeros() as usize;
@@ -702,7 +863,7 @@ impl Accel {
                     cur = n.child[near];
                     continue;
                 }
-                let mut hits = [(0u32, 0f32); 4];
+                let mut hits = [(0u32, 0f32); W];
                 let mut k = 0;
                 let mut m = mask;
                 while m != 0 {
@@ -758,22 +919,37 @@ impl Accel {
     /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
     /// rays): stops at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        if self.nodes.is_empty() {
-            return false;
+        match &self.nodes {
+            Nodes::Four(nodes) if nodes.is_empty() => false,
+            Nodes::Four(nodes) => {
+                with_stack(self.stack_size, |s| self.occluded_with(nodes, ray, s))
+            }
+            // SAFETY: 8-wide trees exist only on CPUs with AVX.
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(nodes) => unsafe { self.occluded_avx(nodes, ray) },
         }
-        with_stack(self.stack_size, |stack| self.occluded_with(ray, stack))
+    }
+
+    /// The 8-wide any-hit traversal, compiled for AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn occluded_avx(&self, nodes: &[Node<8>], ray: &Ray) -> bool {
+        with_stack(self.stack_size, |s| self.occluded_with(nodes, ray, s))
     }
 
     #[inline(always)]
-    fn occluded_with(&self, ray: &Ray, mut stack: Stack) -> bool {
+    fn occluded_with<const W: usize>(&self, nodes: &[Node<W>], ray: &Ray, mut stack: Stack) -> bool
+    where
+        Node<W>: BoxTest<W>,
+    {
         let tr = TRay::new(ray);
         let (tmin, tmax) = (ray.tmin, ray.tmax);
         let tmax_far = tmax * FAR_ROUND_UP;
         stack.push((0, tmin));
         while let Some((mut cur, _)) = stack.pop() {
             while cur & LEAF == 0 {
-                let n = self.node(cur);
-                let (mut mask, _) = tr.hit_node(n, tmin, tmax_far);
+                let n = node(nodes, cur);
+                let (mut mask, _) = n.hit(&tr, tmin, tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -916,6 +1092,16 @@ mod tests {
         best
     }
 
+    /// The widths this CPU traverses: the portable 4-wide kernel, and the
+    /// 8-wide one where AVX is present.
+    fn widths() -> Vec<Width> {
+        let mut w = vec![Width::Four];
+        if Width::detect() != Width::Four {
+            w.push(Width::detect());
+        }
+        w
+    }
+
     fn check_against_brute(
         shapes: &[Shape],
         store: &ParamStore,
@@ -989,9 +1175,11 @@ mod tests {
     fn closest_hit_equals_brute_force_on_a_mesh() {
         let mut store = ParamStore::new();
         let shapes = vec![grid(24, "g", 0.0, &mut store)];
-        let accel = Accel::build(&shapes, &store);
-        assert_eq!(accel.prim_count(), 2 * 24 * 24);
-        check_against_brute(&shapes, &store, &accel, 7, 3000);
+        for w in widths() {
+            let accel = Accel::build_with_width(&shapes, &store, w);
+            assert_eq!(accel.prim_count(), 2 * 24 * 24);
+            check_against_brute(&shapes, &store, &accel, 7, 3000);
+        }
     }
 
     #[test]
@@ -1015,8 +1203,10 @@ mod tests {
             .after(&Transform::new(glam::Mat4::from_scale(Vec3::new(0.8, 0.5, 1.0))).unwrap());
         shapes.push(Shape::Disk(Disk::new("d", &t, false, &mut store).unwrap()));
         shapes.push(grid(6, "g2", 0.9, &mut store));
-        let accel = Accel::build(&shapes, &store);
-        check_against_brute(&shapes, &store, &accel, 11, 3000);
+        for w in widths() {
+            let accel = Accel::build_with_width(&shapes, &store, w);
+            check_against_brute(&shapes, &store, &accel, 11, 3000);
+        }
     }
 
     #[test]
@@ -1034,7 +1224,10 @@ mod tests {
             )
             .unwrap(),
         ));
-        let mut accel = Accel::build(&shapes, &store);
+        let mut accels: Vec<Accel> = widths()
+            .into_iter()
+            .map(|w| Accel::build_with_width(&shapes, &store, w))
+            .collect();
         let mut p = store.data(store.id("g.vertex_positions").unwrap()).to_vec();
         for (i, v) in p.iter_mut().enumerate() {
             if i % 3 == 2 {
@@ -1049,8 +1242,10 @@ mod tests {
         for s in shapes.iter_mut() {
             s.parameters_changed(&mut store, &changed).unwrap();
         }
-        accel.update(&shapes, &store);
-        check_against_brute(&shapes, &store, &accel, 3, 2000);
+        for accel in &mut accels {
+            accel.update(&shapes, &store);
+            check_against_brute(&shapes, &store, accel, 3, 2000);
+        }
     }
 
     #[test]
