@@ -123,6 +123,7 @@ impl<const W: usize> Node<W> {
         child: [EMPTY; W],
     };
 
+    /// Puts `child`, with box `bb`, in slot `slot`.
     fn set(&mut self, slot: usize, child: u32, bb: &Aabb) {
         self.child[slot] = child;
         for a in 0..3 {
