@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The traversal kernel on identical rays: Penumbra's `Scene.ray_intersect`
-/ `Scene.ray_test` beside Embree (PyPI `embreex`, Embree 2.17, one thread:
-it holds Python's lock), on the 327,682 triangles of scenes/mesh_heavy.xml
-(the displaced sphere, the ground and the light's rectangle).
+/ `Scene.ray_test` beside Embree (PyPI `embreex`, which bundles Embree 4
+from its version 4 on; one thread: it holds Python's lock), on the 327,682
+triangles of scenes/mesh_heavy.xml (the displaced sphere, the ground and
+the light's rectangle).
 
 Rays (fixed seed), --res² of each kind:
   primary   pinhole rays through the pixel centres of the scene's camera;
@@ -20,6 +21,11 @@ thread); the median time gives millions of rays per second. Hits are
 compared ray by ray: same hit/miss, |t − t_embree| ≤ 1e-4 · max(1, t).
 Writes a Markdown table to --md (default docs/bench_rays.md).
 
+--baseline-python PY adds a "before" column: Penumbra timed by another
+interpreter, e.g. a virtualenv holding the wheel of an earlier commit
+(--baseline-label names it), interleaved with the other runs, so that
+before and after share the machine's load.
+
 A development tool, not part of the tests. Set-up, once:
 
   scripts/test_python.sh -k nothing        # builds the wheel into target/py-venv
@@ -28,6 +34,7 @@ A development tool, not part of the tests. Set-up, once:
 """
 import argparse
 import datetime
+import importlib.metadata
 import json
 import os
 import platform
@@ -151,9 +158,9 @@ def worker(a):
     print("RESULT " + json.dumps(out))
 
 
-def run(a, renderer, kind, threads, save):
+def run(a, renderer, kind, threads, save, python=sys.executable):
     env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
-    cmd = [sys.executable, __file__, "--worker", "--renderer", renderer, "--kind", kind,
+    cmd = [python, __file__, "--worker", "--renderer", renderer, "--kind", kind,
            "--res", str(a.res), "--reps", str(a.reps), "--save", save]
     r = subprocess.run(cmd, env=env, capture_output=True, text=True)
     line = next((l for l in r.stdout.splitlines() if l.startswith("RESULT ")), None)
@@ -167,6 +174,8 @@ def main():
     ap.add_argument("--res", type=int, default=512)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--md", default=os.path.join(ROOT, "docs", "bench_rays.md"))
+    ap.add_argument("--baseline-python", help="interpreter with an earlier Penumbra wheel")
+    ap.add_argument("--baseline-label", default="baseline")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--renderer", help=argparse.SUPPRESS)
     ap.add_argument("--kind", help=argparse.SUPPRESS)
@@ -182,19 +191,27 @@ def main():
     rows = []
     for kind in KINDS:
         res = {}
-        for name, renderer, threads in (("embree", "embree", 1), ("pn1", "penumbra", 1), (f"pn{cores}", "penumbra", cores)):
+        configs = [("embree", "embree", 1, sys.executable), ("pn1", "penumbra", 1, sys.executable),
+                   (f"pn{cores}", "penumbra", cores, sys.executable)]
+        if a.baseline_python:
+            configs += [("base1", "penumbra", 1, a.baseline_python),
+                        (f"base{cores}", "penumbra", cores, a.baseline_python)]
+        for name, renderer, threads, python in configs:
             save = os.path.join(tmp, f"{name}_{kind}.npy")
-            res[name] = (run(a, renderer, kind, threads, save), np.load(save))
+            res[name] = (run(a, renderer, kind, threads, save, python), np.load(save))
         (e, eh), (p, ph) = res["embree"], res["pn1"]
         same_hit = np.mean(eh[0] == ph[0])
         both = (eh[0] > 0) & (ph[0] > 0)
         t_ok = np.mean(np.abs(eh[1][both] - ph[1][both]) <= 1e-4 * np.maximum(1, eh[1][both])) if kind != "shadow" else float("nan")
         mrays = {k: r["rays"] / statistics.median(r["times"]) / 1e6 for k, (r, _) in res.items()}
+        # identical results before and after: hit/miss and t bit for bit
+        mrays["same_as_base"] = float(np.mean(np.all(res["base1"][1] == ph, axis=0))) if "base1" in res else None
         rows.append((kind, e["rays"], mrays, same_hit, t_ok, e.get("build_s")))
-        print(kind, {k: round(v, 2) for k, v in mrays.items()}, f"same hit {same_hit:.5f}", file=sys.stderr)
+        print(kind, {k: round(v, 2) for k, v in mrays.items() if v is not None}, f"same hit {same_hit:.5f}", file=sys.stderr)
     load1 = os.getloadavg()[0]
     rev = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     pn_many = f"pn{cores}"
+    base = a.baseline_python is not None
     lines = [
         "# Traversal kernel: Penumbra's `ray_intersect` beside Embree on identical rays",
         "",
@@ -202,7 +219,7 @@ def main():
         "",
         f"- date: {datetime.datetime.now():%Y-%m-%d %H:%M}; run took {(time.time() - start) / 60:.1f} min",
         f"- machine: {cores} cores, {platform.machine()}, Linux {platform.release()}; load average {load0:.1f} at the start, {load1:.1f} at the end (shared with other builds: quote ratios from one run)",
-        f"- Penumbra {rev}; Embree via embreex (Embree 2.17, single-ray queries over numpy arrays, one thread)",
+        f"- Penumbra {rev}; Embree via embreex {importlib.metadata.version('embreex')} (single-ray queries over numpy arrays, one thread)",
         f"- scene: scenes/mesh_heavy.xml, 327,684 triangles; {a.res}² rays per kind; median of {a.reps} calls, each in its process after loading",
         "",
         f"| rays | count | Embree 1 thread, M rays/s | Penumbra 1 thread, M rays/s | ratio Penumbra / Embree (1 thread) | Penumbra {cores} threads, M rays/s | same hit / miss | same t (1e-4) |",
@@ -211,6 +228,18 @@ def main():
     for kind, n, m, same, tok, _ in rows:
         tok_s = "—" if kind == "shadow" else f"{tok:.5f}"
         lines.append(f"| {kind} | {n} | {m['embree']:.2f} | {m['pn1']:.2f} | {m['pn1'] / m['embree']:.2f} | {m[pn_many]:.2f} | {same:.5f} | {tok_s} |")
+    if base:
+        lines += [
+            "",
+            f"Before ({a.baseline_label}) and after, same run, M rays/s:",
+            "",
+            f"| rays | before, 1 thread | after, 1 thread | speed-up | before / Embree | after / Embree | before, {cores} threads | after, {cores} threads | speed-up | results identical to before |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for kind, _, m, _, _, _ in rows:
+            b1, bn = m["base1"], m[f"base{cores}"]
+            lines.append(f"| {kind} | {b1:.2f} | {m['pn1']:.2f} | {m['pn1'] / b1:.2f} | {b1 / m['embree']:.2f} | "
+                         f"{m['pn1'] / m['embree']:.2f} | {bn:.2f} | {m[pn_many]:.2f} | {m[pn_many] / bn:.2f} | {m['same_as_base']:.5f} |")
     lines += ["", "Shadow rays are `ray_test` (any hit before tmax) on both sides; Embree's tree build is not timed."]
     with open(a.md, "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -2,12 +2,14 @@
 //! triangle displaced sphere of the reference scenes, with camera-like
 //! rays: a pinhole camera at distance 4 looking at the mesh, 256×256
 //! pixel grid, jittered. Closest hit (`Accel::intersect`) and occlusion
-//! (`Accel::occluded`, shadow rays from the hit points towards a light).
+//! (`Accel::occluded`, shadow rays from the hit points towards a light),
+//! with the widest nodes the CPU traverses and with the 4-wide fallback.
 //!
 //! Run: `cargo bench -p penumbra --bench traversal`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
+use penumbra::geometry::accel::Width;
 use penumbra::geometry::{ply, Accel, Mesh, MeshOptions, Ray, Shape};
 use penumbra::math::Transform;
 use penumbra::params::ParamStore;
@@ -102,27 +104,37 @@ fn bench(c: &mut Criterion) {
         .collect();
     eprintln!("{} camera rays, {} shadow rays", rays.len(), shadow.len());
 
+    let mut widths = vec![(Width::detect(), accel)];
+    if Width::detect() != Width::Four {
+        widths.push((
+            Width::Four,
+            Accel::build_with_width(&shapes, &store, Width::Four),
+        ));
+    }
     let mut g = c.benchmark_group("displaced_sphere");
-    g.throughput(Throughput::Elements(rays.len() as u64));
-    g.bench_function("closest_hit", |b| {
-        b.iter(|| {
-            let mut n = 0u32;
-            for r in &rays {
-                n += accel.intersect(black_box(r)).is_some() as u32;
-            }
-            n
-        })
-    });
-    g.throughput(Throughput::Elements(shadow.len() as u64));
-    g.bench_function("occluded", |b| {
-        b.iter(|| {
-            let mut n = 0u32;
-            for r in &shadow {
-                n += accel.occluded(black_box(r)) as u32;
-            }
-            n
-        })
-    });
+    for (w, accel) in &widths {
+        let wide = if *w == Width::Four { "4" } else { "8" };
+        g.throughput(Throughput::Elements(rays.len() as u64));
+        g.bench_function(format!("closest_hit_{wide}wide"), |b| {
+            b.iter(|| {
+                let mut n = 0u32;
+                for r in &rays {
+                    n += accel.intersect(black_box(r)).is_some() as u32;
+                }
+                n
+            })
+        });
+        g.throughput(Throughput::Elements(shadow.len() as u64));
+        g.bench_function(format!("occluded_{wide}wide"), |b| {
+            b.iter(|| {
+                let mut n = 0u32;
+                for r in &shadow {
+                    n += accel.occluded(black_box(r)) as u32;
+                }
+                n
+            })
+        });
+    }
     g.finish();
 }
 

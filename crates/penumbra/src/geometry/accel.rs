@@ -1,15 +1,22 @@
-//! The acceleration structure: a 4-wide BVH over all primitives of all
+//! The acceleration structure: a wide BVH over all primitives of all
 //! shapes (every triangle of every mesh, and one primitive per analytic
 //! shape: sphere, disk), laid out for SIMD traversal on the CPU in the
 //! manner of Embree (Wald et al. 2014, "Embree: A Kernel Framework for
-//! Efficient CPU Ray Tracing"): each node holds the boxes of its four
-//! children as structure-of-arrays, tested against one ray at once, and
-//! each leaf holds up to four triangles as one packet (`v0`, `e1 = v0 -
-//! v1`, `e2 = v2 - v0`, `ng = e1 × e2` per lane), also tested at once.
+//! Efficient CPU Ray Tracing"): each node holds the boxes of its children
+//! as structure-of-arrays, tested against one ray at once, and each leaf
+//! holds up to four triangles as one packet (`v0`, `e1 = v0 - v1`, `e2 =
+//! v2 - v0`, `ng = e1 × e2` per lane), also tested at once.
+//!
+//! Nodes are 8-wide (one 256-bit AVX box test per node) when the CPU has
+//! AVX, detected at run time ([`Width::detect`]), else 4-wide (SSE on
+//! x86-64, glam's portable `Vec4` elsewhere): one build runs on every
+//! machine. Wider nodes halve the number of node visits per ray on
+//! incoherent rays (Wald, Benthin, Boulos 2008, "Getting Rid of Packets";
+//! Embree's BVH8).
 //!
 //! The tree is built as a binary BVH by PLOC with reinsertion (the `obvhs`
-//! crate), then collapsed to four-wide nodes (opening the child of largest
-//! surface area until four children are gathered; subtrees of at most four
+//! crate), then collapsed to wide nodes (opening the child of largest
+//! surface area until the node is full; subtrees of at most four
 //! primitives become leaves). Triangles are two-sided (no backface
 //! culling). Analytic primitives sit in the packets as lanes flagged in a
 //! mask (zero edges), handled off the hot path.
@@ -71,18 +78,144 @@ const LEAF: u32 = 0x8000_0000;
 const EMPTY: u32 = u32::MAX;
 /// Subtrees with at most this many primitives become one leaf.
 const LEAF_SIZE: u32 = 4;
-/// Traversal stack entries kept on the machine stack; deeper trees use a
-/// heap stack (see [`Accel::stack_size`]).
+/// Traversal stack entries kept on the machine stack; a tree that needs
+/// more (see [`Accel::stack_size`]) gets a heap stack of its exact size,
+/// chosen once per ray.
 const STACK: usize = 96;
+/// Ize 2013 ("Robust BVH Ray Traversal", JCGT 2(2)): rounding the far slab
+/// distance `(b - o) · (1/d)` up by this factor keeps the box test
+/// conservative (no box a ray touches is missed, flat boxes included).
+const FAR_ROUND_UP: f32 = 1.0 + 4.0 * f32::EPSILON;
 
-/// A 4-wide BVH node: the boxes of its four children as structure of
-/// arrays (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child)
-/// and the children (node index, `LEAF | packet index`, or `EMPTY`).
+/// Children per BVH node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Width {
+    #[default]
+    Four,
+    Eight,
+}
+
+impl Width {
+    /// The widest the running CPU traverses with SIMD: eight with AVX.
+    pub fn detect() -> Width {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            return Width::Eight;
+        }
+        Width::Four
+    }
+}
+
+/// A `W`-wide BVH node: the boxes of its children as structure of arrays
+/// (`b[0]`: minima, `b[1]`: maxima, per axis, one lane per child) and the
+/// children (node index, `LEAF | packet index`, or `EMPTY`, whose box is
+/// empty).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-struct Node4 {
-    b: [[Vec4; 3]; 2],
-    child: [u32; 4],
+struct Node<const W: usize> {
+    b: [[[f32; W]; 3]; 2],
+    child: [u32; W],
+}
+
+impl<const W: usize> Node<W> {
+    const EMPTY: Node<W> = Node {
+        b: [[[f32::INFINITY; W]; 3], [[f32::NEG_INFINITY; W]; 3]],
+        child: [EMPTY; W],
+    };
+
+    /// Puts `child`, with box `bb`, in slot `slot`.
+    fn set(&mut self, slot: usize, child: u32, bb: &Aabb) {
+        self.child[slot] = child;
+        for a in 0..3 {
+            self.b[0][a][slot] = bb.min[a];
+            self.b[1][a][slot] = bb.max[a];
+        }
+    }
+}
+
+/// The box test of a node against one ray.
+trait BoxTest<const W: usize> {
+    /// Which children the ray overlaps on `[tmin, tmax_far]` (bit k: child
+    /// k), and the entry distances; see [`TRay::hit_node`].
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; W]);
+}
+
+impl BoxTest<4> for Node<4> {
+    #[inline(always)]
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 4]) {
+        let (mask, t0) = tr.hit_node(self, tmin, tmax_far);
+        (mask, t0.to_array())
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BoxTest<8> for Node<8> {
+    #[inline(always)]
+    fn hit(&self, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 8]) {
+        // SAFETY: 8-wide trees exist only on CPUs with AVX
+        // (`Accel::build_with_width` caps the width at `Width::detect`).
+        unsafe { hit_node8(self, tr, tmin, tmax_far) }
+    }
+}
+
+/// [`TRay::hit_node`] for eight children: the same arithmetic in the same
+/// order on 256-bit registers (`_mm256_max_ps(x, acc)` keeps `acc` when x
+/// is NaN, as SSE does).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+fn hit_node8(n: &Node<8>, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 8]) {
+    use std::arch::x86_64::*;
+    // SAFETY: each pointer is to an array of eight f32 (unaligned loads).
+    let b = |side: usize, a: usize| unsafe { _mm256_loadu_ps(n.b[side][a].as_ptr()) };
+    let near = |a: usize| {
+        let o = _mm256_set1_ps(tr.o[a].x);
+        let inv = _mm256_set1_ps(tr.inv[a].x);
+        _mm256_mul_ps(_mm256_sub_ps(b(tr.near[a], a), o), inv)
+    };
+    let far = |a: usize| {
+        let o = _mm256_set1_ps(tr.o[a].x);
+        let inv = _mm256_set1_ps(tr.inv_far[a].x);
+        _mm256_mul_ps(_mm256_sub_ps(b(1 - tr.near[a], a), o), inv)
+    };
+    let t0 = _mm256_max_ps(
+        near(0),
+        _mm256_max_ps(near(1), _mm256_max_ps(near(2), _mm256_set1_ps(tmin))),
+    );
+    let t1 = _mm256_min_ps(
+        far(0),
+        _mm256_min_ps(far(1), _mm256_min_ps(far(2), _mm256_set1_ps(tmax_far))),
+    );
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    let mut out = [0.0; 8];
+    // SAFETY: `out` holds eight f32 (unaligned store).
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t0) };
+    (mask, out)
+}
+
+/// The nodes of the tree, at the width chosen at build time; the root is
+/// node 0.
+#[derive(Clone, Debug)]
+enum Nodes {
+    Four(Vec<Node<4>>),
+    #[cfg(target_arch = "x86_64")]
+    Eight(Vec<Node<8>>),
+}
+
+impl Default for Nodes {
+    fn default() -> Nodes {
+        Nodes::Four(Vec::new())
+    }
+}
+
+impl Nodes {
+    fn len(&self) -> usize {
+        match self {
+            Nodes::Four(n) => n.len(),
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(n) => n.len(),
+        }
+    }
 }
 
 /// Up to four primitives of a leaf, laid out for one SIMD intersection
@@ -96,20 +229,24 @@ struct Tri4 {
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     ng: [Vec4; 3],
-    /// Per lane: index of the primitive in build order (`Accel::prims`).
-    id: [u32; 4],
+    /// Per lane: shape index and primitive index within the shape (read
+    /// from the packet, which is in cache, rather than from a table).
+    shape: [u32; 4],
+    prim: [u32; 4],
     /// Lanes (bit k: lane k) holding analytic primitives.
     analytic: u32,
     /// Another packet of the same leaf follows this one.
     more: bool,
 }
 
-/// The ray as traversal uses it: splatted origin and inverse direction,
-/// and which box side (min/max) is the near one per axis.
+/// The ray as traversal uses it: splatted origin and inverse direction
+/// (for the far slab, rounded up once per ray, see [`FAR_ROUND_UP`]), and
+/// which box side (min/max) is the near one per axis.
 struct TRay {
     o: [Vec4; 3],
     d: [Vec4; 3],
     inv: [Vec4; 3],
+    inv_far: [Vec4; 3],
     near: [usize; 3],
 }
 
@@ -120,6 +257,7 @@ impl TRay {
         // the min side as near, consistently
         let d = ray.d + Vec3::ZERO;
         let inv = d.recip();
+        let inv_far = inv * FAR_ROUND_UP;
         TRay {
             o: [
                 Vec4::splat(ray.o.x),
@@ -128,6 +266,11 @@ impl TRay {
             ],
             d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            inv_far: [
+                Vec4::splat(inv_far.x),
+                Vec4::splat(inv_far.y),
+                Vec4::splat(inv_far.z),
+            ],
             near: [
                 (inv.x < 0.0) as usize,
                 (inv.y < 0.0) as usize,
@@ -136,20 +279,27 @@ impl TRay {
         }
     }
 
-    /// Which children of `n` the ray overlaps on `[tmin, tmax]` (bit k:
-    /// child k), and the entry distances. Slab distances that are NaN
-    /// (a zero direction component with the origin on a box plane) do not
-    /// constrain the interval; the far distance is widened by a few ulps so
-    /// that rounding cannot miss flat boxes (Ize 2013, "Robust BVH Ray
-    /// Traversal").
+    /// Which children of `n` the ray overlaps on `[tmin, tmax_far]` (bit
+    /// k: child k), and the entry distances; `tmax_far` is the ray's tmax
+    /// rounded up by [`FAR_ROUND_UP`], as the far slabs are. Slab distances
+    /// that are NaN (a zero direction component with the origin on a box
+    /// plane) do not constrain the interval.
+    ///
+    /// The slabs are `(b - o) · inv`, not one FMA `b · inv - o · inv` with
+    /// `o · inv` precomputed: the rounding of `o · inv` is relative to the
+    /// origin's coordinates, not to the distance, and is not covered by a
+    /// relative factor for rays that start near a box (shadow and bounce
+    /// rays leave a surface 1e-4 away), so the FMA form is not
+    /// conservative (Ize 2013, section 3).
     #[inline(always)]
-    fn hit_node(&self, n: &Node4, tmin: f32, tmax: f32) -> (u32, Vec4) {
-        let slab = |a: usize, side: usize| (n.b[side][a] - self.o[a]) * self.inv[a];
+    fn hit_node(&self, n: &Node<4>, tmin: f32, tmax_far: f32) -> (u32, Vec4) {
+        let b = |side: usize, a: usize| Vec4::from_array(n.b[side][a]);
+        let near = |a: usize, side: usize| (b(side, a) - self.o[a]) * self.inv[a];
+        let far = |a: usize, side: usize| (b(side, a) - self.o[a]) * self.inv_far[a];
         let [nx, ny, nz] = self.near;
         // `max(x, acc)`/`min(x, acc)` keep `acc` when x is NaN (SSE order)
-        let t0 = slab(0, nx).max(slab(1, ny).max(slab(2, nz).max(Vec4::splat(tmin))));
-        let t1 = slab(0, 1 - nx).min(slab(1, 1 - ny).min(slab(2, 1 - nz).min(Vec4::splat(tmax))));
-        let t1 = t1 * (1.0 + 4.0 * f32::EPSILON);
+        let t0 = near(0, nx).max(near(1, ny).max(near(2, nz).max(Vec4::splat(tmin))));
+        let t1 = far(0, 1 - nx).min(far(1, 1 - ny).min(far(2, 1 - nz).min(Vec4::splat(tmax_far))));
         (t0.cmple(t1).bitmask(), t0)
     }
 
@@ -194,65 +344,140 @@ impl TRay {
     }
 }
 
-/// A traversal stack of `(node, entry distance)` on the machine stack
-/// (with a heap fallback for unusually deep trees).
-struct Stack {
-    buf: [MaybeUninit<(u32, f32)>; STACK],
-    heap: Vec<(u32, f32)>,
+/// A traversal stack of `(node, entry distance)` over a buffer of at
+/// least [`Accel::stack_size`] entries (on the machine stack, or on the
+/// heap for unusually deep trees: chosen once per ray, not per push).
+struct Stack<'a> {
+    buf: &'a mut [MaybeUninit<(u32, f32)>],
     len: usize,
-    on_heap: bool,
 }
 
-impl Stack {
+impl<'a> Stack<'a> {
     #[inline(always)]
-    fn new(size: usize) -> Stack {
-        let on_heap = size > STACK;
-        Stack {
-            buf: [const { MaybeUninit::uninit() }; STACK],
-            heap: if on_heap {
-                Vec::with_capacity(size)
-            } else {
-                Vec::new()
-            },
-            len: 0,
-            on_heap,
-        }
+    fn new(buf: &'a mut [MaybeUninit<(u32, f32)>]) -> Stack<'a> {
+        Stack { buf, len: 0 }
     }
     #[inline(always)]
     fn push(&mut self, e: (u32, f32)) {
-        if self.on_heap {
-            self.heap.push(e);
-        } else {
-            self.buf[self.len] = MaybeUninit::new(e);
-            self.len += 1;
-        }
+        debug_assert!(self.len < self.buf.len());
+        // SAFETY: the buffer holds `Accel::stack_size` entries, the most a
+        // traversal of this tree can hold at once (bounded in
+        // `Accel::finish` from the tree's depth), so `len` stays in bounds.
+        unsafe { *self.buf.get_unchecked_mut(self.len) = MaybeUninit::new(e) };
+        self.len += 1;
     }
     #[inline(always)]
     fn pop(&mut self) -> Option<(u32, f32)> {
-        if self.on_heap {
-            return self.heap.pop();
-        }
         if self.len == 0 {
             return None;
         }
         self.len -= 1;
-        // SAFETY: entries below `len` were written by `push`.
-        Some(unsafe { self.buf[self.len].assume_init() })
+        // SAFETY: entries below `len` were written by `push`, and `len` is
+        // within the buffer (see `push`).
+        Some(unsafe { self.buf.get_unchecked(self.len).assume_init() })
     }
 }
 
-/// Collapses the binary BVH `bvh2` into 4-wide nodes and leaf packets.
-struct Collapse<'a> {
+/// Runs `f` with a stack buffer of at least `size` entries: on the machine
+/// stack when [`STACK`] suffices, else on the heap.
+#[inline(always)]
+fn with_stack<T>(size: usize, f: impl FnOnce(Stack) -> T) -> T {
+    if size <= STACK {
+        f(Stack::new(&mut [const { MaybeUninit::uninit() }; STACK]))
+    } else {
+        f(Stack::new(&mut vec![MaybeUninit::uninit(); size]))
+    }
+}
+
+/// Node `i` of `nodes`, a child index read from the tree.
+#[inline(always)]
+fn node<const W: usize>(nodes: &[Node<W>], i: u32) -> &Node<W> {
+    debug_assert!((i as usize) < nodes.len());
+    // SAFETY: `i` is node 0 (traversal starts only on a non-empty tree) or
+    // a non-leaf, non-empty child slot, which `Collapse::node` set to the
+    // index of a node it pushed.
+    unsafe { nodes.get_unchecked(i as usize) }
+}
+
+/// The closest hit so far of a closest-hit traversal.
+struct Closest {
+    tmax: f32,
+    /// `tmax` rounded up as the far slabs are (see [`TRay::hit_node`]).
+    tmax_far: f32,
+    best: Option<Hit>,
+}
+
+impl Closest {
+    #[inline(always)]
+    fn new(tmax: f32) -> Closest {
+        Closest {
+            tmax,
+            tmax_far: tmax * FAR_ROUND_UP,
+            best: None,
+        }
+    }
+    /// Keeps the hit at `t` of lane `j` of `p` if it is the closest yet.
+    #[inline(always)]
+    fn offer(&mut self, t: f32, p: &Tri4, j: usize, uv: Vec2) {
+        if t < self.tmax {
+            self.tmax = t;
+            self.tmax_far = t * FAR_ROUND_UP;
+            self.best = Some(Hit {
+                t,
+                shape: p.shape[j],
+                prim: p.prim[j],
+                uv,
+            });
+        }
+    }
+}
+
+/// Collapses the binary BVH `bvh2` into `W`-wide nodes and leaf packets.
+struct Collapse<'a, const W: usize> {
     bvh2: &'a Bvh2,
     /// Primitives below each binary node.
     count: Vec<u32>,
-    nodes: Vec<Node4>,
+    nodes: Vec<Node<W>>,
     leaves: Vec<[u32; 4]>,
     leaf_more: Vec<bool>,
     depth: usize,
 }
 
-impl Collapse<'_> {
+impl<const W: usize> Collapse<'_, W> {
+    fn new(bvh2: &Bvh2) -> Collapse<'_, W> {
+        let mut count = vec![0u32; bvh2.nodes.len()];
+        Self::count(bvh2, 0, &mut count);
+        Collapse {
+            bvh2,
+            count,
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            leaf_more: Vec::new(),
+            depth: 0,
+        }
+    }
+
+    /// Collapses the whole tree: the root is node 0.
+    fn run(mut self) -> Self {
+        if self.bvh2.nodes[0].is_leaf() || self.count[0] <= LEAF_SIZE {
+            // a root leaf: one node with one child
+            let leaf = self.child(0, 1);
+            let mut n = Node::EMPTY;
+            n.set(0, leaf, self.bvh2.nodes[0].aabb());
+            self.nodes.push(n);
+            self.depth = 1;
+        } else {
+            self.node(0, 0);
+        }
+        self
+    }
+
+    /// The most entries a traversal stack holds: each level pushes at
+    /// most `W - 1`.
+    fn stack_size(&self) -> usize {
+        (W - 1) * self.depth + 2
+    }
+
     fn count(bvh2: &Bvh2, i: usize, out: &mut [u32]) -> u32 {
         let n = &bvh2.nodes[i];
         let c = if n.is_leaf() {
@@ -278,7 +503,7 @@ impl Collapse<'_> {
     }
 
     /// The child slot for binary node `i`: a leaf of packets, or a new
-    /// 4-wide node.
+    /// wide node.
     fn child(&mut self, i: usize, depth: usize) -> u32 {
         if self.count[i] <= LEAF_SIZE || self.bvh2.nodes[i].is_leaf() {
             let mut ids = Vec::new();
@@ -298,14 +523,14 @@ impl Collapse<'_> {
         self.node(i, depth)
     }
 
-    /// A 4-wide node for the interior binary node `i`: opens the child of
-    /// largest surface area until four children are gathered.
+    /// A wide node for the interior binary node `i`: opens the child of
+    /// largest surface area until `W` children are gathered.
     fn node(&mut self, i: usize, depth: usize) -> u32 {
         self.depth = self.depth.max(depth + 1);
         let n = &self.bvh2.nodes[i];
         let f = n.first_index as usize;
         let mut kids = vec![f, f + 1];
-        while kids.len() < 4 {
+        while kids.len() < W {
             let open = kids
                 .iter()
                 .enumerate()
@@ -323,23 +548,10 @@ impl Collapse<'_> {
             kids.push(fk + 1);
         }
         let idx = self.nodes.len();
-        self.nodes.push(Node4 {
-            b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
-            child: [EMPTY; 4],
-        });
+        self.nodes.push(Node::EMPTY);
         for (slot, &k) in kids.iter().enumerate() {
             let c = self.child(k, depth + 1);
-            let bb = self.bvh2.nodes[k].aabb();
-            let node = &mut self.nodes[idx];
-            node.child[slot] = c;
-            for a in 0..3 {
-                let mut lo = node.b[0][a].to_array();
-                let mut hi = node.b[1][a].to_array();
-                lo[slot] = bb.min[a];
-                hi[slot] = bb.max[a];
-                node.b[0][a] = Vec4::from_array(lo);
-                node.b[1][a] = Vec4::from_array(hi);
-            }
+            self.nodes[idx].set(slot, c, self.bvh2.nodes[k].aabb());
         }
         idx as u32
     }
@@ -349,8 +561,8 @@ impl Collapse<'_> {
 #[derive(Clone, Default)]
 pub struct Accel {
     bvh2: Bvh2,
-    /// 4-wide nodes; the root is node 0.
-    nodes: Vec<Node4>,
+    width: Width,
+    nodes: Nodes,
     /// Leaf packets.
     tris: Vec<Tri4>,
     /// Traversal stack size the tree needs.
@@ -383,10 +595,18 @@ fn collect_prims(shapes: &[Shape]) -> Vec<[u32; 2]> {
 
 impl Accel {
     /// Builds the acceleration structure over all primitives of `shapes`
-    /// (positions read from `store`).
+    /// (positions read from `store`), as wide as the CPU allows.
     pub fn build(shapes: &[Shape], store: &ParamStore) -> Accel {
+        Accel::build_with_width(shapes, store, Width::detect())
+    }
+
+    /// [`Accel::build`] with nodes of at most `width` children (capped at
+    /// [`Width::detect`]): for tests and benchmarks of the narrower
+    /// kernel.
+    pub fn build_with_width(shapes: &[Shape], store: &ParamStore, width: Width) -> Accel {
         let mut a = Accel {
             prims: collect_prims(shapes),
+            width: width.min(Width::detect()),
             ..Default::default()
         };
         a.refresh_analytic(shapes, store);
@@ -485,52 +705,39 @@ impl Accel {
             .collect()
     }
 
-    /// Derives the 4-wide BVH from the binary one and packs the
-    /// primitives of each leaf.
+    /// Derives the wide BVH from the binary one and packs the primitives
+    /// of each leaf.
     fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
-        let mut count = vec![0u32; self.bvh2.nodes.len()];
-        Collapse::count(&self.bvh2, 0, &mut count);
-        let mut c = Collapse {
-            bvh2: &self.bvh2,
-            count,
-            nodes: Vec::new(),
-            leaves: Vec::new(),
-            leaf_more: Vec::new(),
-            depth: 0,
-        };
-        if self.bvh2.nodes[0].is_leaf() || c.count[0] <= LEAF_SIZE {
-            // a root leaf: one node with one child
-            let leaf = c.child(0, 1);
-            let bb = *self.bvh2.nodes[0].aabb();
-            let mut n = Node4 {
-                b: [[Vec4::INFINITY; 3], [Vec4::NEG_INFINITY; 3]],
-                child: [EMPTY; 4],
-            };
-            n.child[0] = leaf;
-            for a in 0..3 {
-                n.b[0][a].x = bb.min[a];
-                n.b[1][a].x = bb.max[a];
+        let (leaves, more) = match self.width {
+            Width::Four => {
+                let c = Collapse::<4>::new(&self.bvh2).run();
+                self.stack_size = c.stack_size();
+                self.nodes = Nodes::Four(c.nodes);
+                (c.leaves, c.leaf_more)
             }
-            c.nodes.push(n);
-            c.depth = 1;
-        } else {
-            c.node(0, 0);
-        }
-        // each level pushes at most three entries
-        self.stack_size = 3 * c.depth + 2;
-        self.nodes = c.nodes;
-        let (leaves, more) = (c.leaves, c.leaf_more);
+            #[cfg(target_arch = "x86_64")]
+            Width::Eight => {
+                let c = Collapse::<8>::new(&self.bvh2).run();
+                self.stack_size = c.stack_size();
+                self.nodes = Nodes::Eight(c.nodes);
+                (c.leaves, c.leaf_more)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            Width::Eight => unreachable!("Width::detect gives Four off x86-64"),
+        };
         self.tris = leaves
             .iter()
             .zip(more)
             .map(|(ids, more)| {
                 let mut lanes = [[Vec3::ZERO; 4]; 4];
                 let mut analytic = 0u32;
+                let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
                 for (k, &id) in ids.iter().enumerate() {
                     if id == u32::MAX {
                         continue;
                     }
                     let [s, p] = self.prims[id as usize];
+                    (shape[k], prim[k]) = (s, p);
                     match &shapes[s as usize] {
                         // a zero-area face keeps zero edges, like an
                         // unused lane: never hit (see geometry::mesh)
@@ -559,7 +766,8 @@ impl Accel {
                     e1: soa(1),
                     e2: soa(2),
                     ng: soa(3),
-                    id: *ids,
+                    shape,
+                    prim,
                     analytic,
                     more,
                 }
@@ -572,47 +780,91 @@ impl Accel {
         self.prims.len()
     }
 
-    /// The analytic primitive of packet lane `id` (a build-order index).
+    /// The analytic primitive of shape `shape`.
     #[inline(never)]
-    fn analytic_hit(&self, id: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
-        let s = self.prims[id as usize][0];
-        let a = &self.analytic[self.analytic_of_shape[s as usize] as usize];
+    fn analytic_hit(&self, shape: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
+        let a = &self.analytic[self.analytic_of_shape[shape as usize] as usize];
         a.intersect(ray.o, ray.d, tmin, tmax)
+    }
+
+    /// Leaf packet `i`: the first of a leaf (its child slot without the
+    /// `LEAF` bit) or one after a packet with `more` set.
+    #[inline(always)]
+    fn packet(&self, i: usize) -> &Tri4 {
+        debug_assert!(i < self.tris.len());
+        // SAFETY: `Collapse::child` pushes a leaf's packets consecutively
+        // and stores the index of its first one; `more` is set on all but
+        // the last, so every index reached is below `tris.len()`.
+        unsafe { self.tris.get_unchecked(i) }
     }
 
     /// The closest hit on the open interval `(ray.tmin, ray.tmax)`.
     /// For triangles, `Hit::uv` holds the barycentrics `(b1, b2)` of
     /// `p = (1 - b1 - b2) p0 + b1 p1 + b2 p2`.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        if self.nodes.is_empty() {
-            return None;
+        match &self.nodes {
+            Nodes::Four(nodes) if nodes.is_empty() => None,
+            Nodes::Four(nodes) => {
+                with_stack(self.stack_size, |s| self.intersect_with(nodes, ray, s))
+            }
+            // SAFETY: 8-wide trees exist only on CPUs with AVX.
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(nodes) => unsafe { self.intersect_avx(nodes, ray) },
         }
+    }
+
+    /// The 8-wide traversal, compiled for AVX (with the triangle tests).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn intersect_avx(&self, nodes: &[Node<8>], ray: &Ray) -> Option<Hit> {
+        with_stack(self.stack_size, |s| self.intersect_with(nodes, ray, s))
+    }
+
+    #[inline(always)]
+    fn intersect_with<const W: usize>(
+        &self,
+        nodes: &[Node<W>],
+        ray: &Ray,
+        mut stack: Stack,
+    ) -> Option<Hit>
+    where
+        Node<W>: BoxTest<W>,
+    {
         let tr = TRay::new(ray);
         let tmin = ray.tmin;
-        let mut tmax = ray.tmax;
-        let mut best = u32::MAX;
-        let (mut bu, mut bv) = (0.0f32, 0.0f32);
-        let mut stack = Stack::new(self.stack_size);
+        let mut c = Closest::new(ray.tmax);
         stack.push((0, tmin));
         while let Some((mut cur, t_enter)) = stack.pop() {
-            if t_enter > tmax {
+            if t_enter > c.tmax {
                 continue;
             }
             // descend, nearest child first, the others onto the stack
             while cur & LEAF == 0 {
-                let n = &self.nodes[cur as usize];
-                let (mask, t0) = tr.hit_node(n, tmin, tmax);
+                let n = node(nodes, cur);
+                let (mask, t0) = n.hit(&tr, tmin, c.tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
                 }
                 let first = mask.trailing_zeros() as usize;
-                if mask & (mask - 1) == 0 {
+                let rest = mask & (mask - 1);
+                if rest == 0 {
                     cur = n.child[first];
                     continue;
                 }
-                let t0 = t0.to_array();
-                let mut hits = [(0u32, 0f32); 4];
+                if rest & (rest - 1) == 0 {
+                    // two children, the common case: no sort
+                    let second = rest.trailing_zeros() as usize;
+                    let (near, far) = if t0[second] < t0[first] {
+                        (second, first)
+                    } else {
+                        (first, second)
+                    };
+                    stack.push((n.child[far], t0[far]));
+                    cur = n.child[near];
+                    continue;
+                }
+                let mut hits = [(0u32, 0f32); W];
                 let mut k = 0;
                 let mut m = mask;
                 while m != 0 {
@@ -638,33 +890,23 @@ impl Accel {
             }
             let mut pi = (cur & !LEAF) as usize;
             loop {
-                let p = &self.tris[pi];
-                let (mask, t, u, v) = tr.hit_tris(p, tmin, tmax);
+                let p = self.packet(pi);
+                let (mask, t, u, v) = tr.hit_tris(p, tmin, c.tmax);
                 if mask != 0 {
                     let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
                     let mut m = mask;
                     while m != 0 {
                         let j = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        if t[j] < tmax {
-                            tmax = t[j];
-                            best = p.id[j];
-                            bu = u[j];
-                            bv = v[j];
-                        }
+                        c.offer(t[j], p, j, Vec2::new(u[j], v[j]));
                     }
                 }
                 let mut m = p.analytic;
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let t = self.analytic_hit(p.id[j], ray, tmin, tmax);
-                    if t < tmax {
-                        tmax = t;
-                        best = p.id[j];
-                        bu = 0.0;
-                        bv = 0.0;
-                    }
+                    let t = self.analytic_hit(p.shape[j], ray, tmin, c.tmax);
+                    c.offer(t, p, j, Vec2::ZERO);
                 }
                 if !p.more {
                     break;
@@ -672,32 +914,43 @@ impl Accel {
                 pi += 1;
             }
         }
-        if best == u32::MAX {
-            return None;
-        }
-        let [shape, prim] = self.prims[best as usize];
-        Some(Hit {
-            t: tmax,
-            shape,
-            prim,
-            uv: Vec2::new(bu, bv),
-        })
+        c.best
     }
 
     /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
     /// rays): stops at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        if self.nodes.is_empty() {
-            return false;
+        match &self.nodes {
+            Nodes::Four(nodes) if nodes.is_empty() => false,
+            Nodes::Four(nodes) => {
+                with_stack(self.stack_size, |s| self.occluded_with(nodes, ray, s))
+            }
+            // SAFETY: 8-wide trees exist only on CPUs with AVX.
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(nodes) => unsafe { self.occluded_avx(nodes, ray) },
         }
+    }
+
+    /// The 8-wide any-hit traversal, compiled for AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn occluded_avx(&self, nodes: &[Node<8>], ray: &Ray) -> bool {
+        with_stack(self.stack_size, |s| self.occluded_with(nodes, ray, s))
+    }
+
+    #[inline(always)]
+    fn occluded_with<const W: usize>(&self, nodes: &[Node<W>], ray: &Ray, mut stack: Stack) -> bool
+    where
+        Node<W>: BoxTest<W>,
+    {
         let tr = TRay::new(ray);
         let (tmin, tmax) = (ray.tmin, ray.tmax);
-        let mut stack = Stack::new(self.stack_size);
+        let tmax_far = tmax * FAR_ROUND_UP;
         stack.push((0, tmin));
         while let Some((mut cur, _)) = stack.pop() {
             while cur & LEAF == 0 {
-                let n = &self.nodes[cur as usize];
-                let (mut mask, _) = tr.hit_node(n, tmin, tmax);
+                let n = node(nodes, cur);
+                let (mut mask, _) = n.hit(&tr, tmin, tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -716,7 +969,7 @@ impl Accel {
             }
             let mut pi = (cur & !LEAF) as usize;
             loop {
-                let p = &self.tris[pi];
+                let p = self.packet(pi);
                 if tr.hit_tris(p, tmin, tmax).0 != 0 {
                     return true;
                 }
@@ -724,7 +977,7 @@ impl Accel {
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if self.analytic_hit(p.id[j], ray, tmin, tmax) < tmax {
+                    if self.analytic_hit(p.shape[j], ray, tmin, tmax) < tmax {
                         return true;
                     }
                 }
@@ -840,6 +1093,16 @@ mod tests {
         best
     }
 
+    /// The widths this CPU traverses: the portable 4-wide kernel, and the
+    /// 8-wide one where AVX is present.
+    fn widths() -> Vec<Width> {
+        let mut w = vec![Width::Four];
+        if Width::detect() != Width::Four {
+            w.push(Width::detect());
+        }
+        w
+    }
+
     fn check_against_brute(
         shapes: &[Shape],
         store: &ParamStore,
@@ -913,9 +1176,11 @@ mod tests {
     fn closest_hit_equals_brute_force_on_a_mesh() {
         let mut store = ParamStore::new();
         let shapes = vec![grid(24, "g", 0.0, &mut store)];
-        let accel = Accel::build(&shapes, &store);
-        assert_eq!(accel.prim_count(), 2 * 24 * 24);
-        check_against_brute(&shapes, &store, &accel, 7, 3000);
+        for w in widths() {
+            let accel = Accel::build_with_width(&shapes, &store, w);
+            assert_eq!(accel.prim_count(), 2 * 24 * 24);
+            check_against_brute(&shapes, &store, &accel, 7, 3000);
+        }
     }
 
     #[test]
@@ -939,8 +1204,10 @@ mod tests {
             .after(&Transform::new(glam::Mat4::from_scale(Vec3::new(0.8, 0.5, 1.0))).unwrap());
         shapes.push(Shape::Disk(Disk::new("d", &t, false, &mut store).unwrap()));
         shapes.push(grid(6, "g2", 0.9, &mut store));
-        let accel = Accel::build(&shapes, &store);
-        check_against_brute(&shapes, &store, &accel, 11, 3000);
+        for w in widths() {
+            let accel = Accel::build_with_width(&shapes, &store, w);
+            check_against_brute(&shapes, &store, &accel, 11, 3000);
+        }
     }
 
     #[test]
@@ -958,7 +1225,10 @@ mod tests {
             )
             .unwrap(),
         ));
-        let mut accel = Accel::build(&shapes, &store);
+        let mut accels: Vec<Accel> = widths()
+            .into_iter()
+            .map(|w| Accel::build_with_width(&shapes, &store, w))
+            .collect();
         let mut p = store.data(store.id("g.vertex_positions").unwrap()).to_vec();
         for (i, v) in p.iter_mut().enumerate() {
             if i % 3 == 2 {
@@ -973,8 +1243,10 @@ mod tests {
         for s in shapes.iter_mut() {
             s.parameters_changed(&mut store, &changed).unwrap();
         }
-        accel.update(&shapes, &store);
-        check_against_brute(&shapes, &store, &accel, 3, 2000);
+        for accel in &mut accels {
+            accel.update(&shapes, &store);
+            check_against_brute(&shapes, &store, accel, 3, 2000);
+        }
     }
 
     #[test]
