@@ -342,6 +342,7 @@ fn domain_name(d: Domain) -> &'static str {
         Domain::NonNegative => "nonnegative",
         Domain::Positive => "positive",
         Domain::UnitInterval => "unit_interval",
+        Domain::OpenSignedUnit => "open_signed_unit",
     }
 }
 
