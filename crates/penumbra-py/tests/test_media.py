@@ -83,7 +83,7 @@ def test_grid_gradients_are_the_transpose_of_forward_mode():
     [
         (np.zeros((4, 4)), r"expected shape \[z, y, x\] or \[z, y, x, c\]"),
         (np.zeros((4, 4, 4, 2)), r"expected shape"),
-        (np.full((2, 2, 2), np.nan), "non-finite"),
+        (np.full((2, 2, 2), np.nan), "the grid has non-finite values"),
     ],
 )
 def test_bad_grids_are_refused_naming_the_entry(data, msg):
