@@ -2,18 +2,23 @@
 """Gradient benchmarks: Penumbra beside Mitsuba 3's prb, measured in the same
 run, and the peak memory of Penumbra's reverse mode against path depth.
 
-  1. The jobs of scripts/mitsuba/bench.py (128², 64 spp):
+  1. The jobs of scripts/mitsuba/bench.py (128², 64 spp unless noted):
        grad_rev_bsdf   reverse mode, dL2/d red.reflectance (cbox, 0.4 grey)
        grad_rev_tex    reverse mode, dL2/d plane texture (textured, 0.5)
        grad_fwd_albedo forward mode, d image / d scale of red.reflectance
+       vol_hetero_rev  reverse mode, dL2/d density grid (volume_hetero, 0.3,
+                       32 spp; Mitsuba's prbvolpath), with --jobs
      each as `penumbra grad ... --reps N` (primal render + gradient pass,
      first call and warm median) and Mitsuba llvm_ad_rgb (first call with JIT,
      warm median).
-  2. Peak RSS of `penumbra grad` (reverse, cbox 128², 64 spp) for max_depth
-     2..64: path replay keeps only parameter and image buffers, so memory
+  2. Peak RSS of `penumbra grad` (reverse, cbox 128², 64 spp; or the
+     density grid of volume_hetero, 32 spp, with --memory volume_hetero) for
+     max_depth 2..64: the local tape holds one path at a time, so memory
      should not grow with depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
+      [--jobs grad_rev_bsdf grad_rev_tex grad_fwd_albedo vol_hetero_rev]
+      [--memory cbox|volume_hetero]
 """
 import argparse
 import json
@@ -56,11 +61,14 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--reps', type=int, default=3)
     ap.add_argument('--no-mitsuba', action='store_true')
+    ap.add_argument('--jobs', nargs='+', default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_fwd_albedo'])
+    ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
     a = ap.parse_args()
     subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
     r = str(a.reps)
+    spp = {'vol_hetero_rev': '32'}
     jobs = {
         'grad_rev_bsdf': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
                           '--init', '0.4', '--target', 'scenes/refs/cbox_target128.exr',
@@ -71,30 +79,44 @@ def main():
                          '-o', 'out/bench_grad'],
         'grad_fwd_albedo': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
                             '--mode', 'forward', '--spp', '64', '--reps', r, '-o', 'out/bench_grad'],
+        'vol_hetero_rev': ['scenes/volume_hetero.xml', '-D', 'res=128', '--param',
+                           'medium.sigma_t.data', '--init', '0.3', '--target',
+                           'scenes/refs/volume_hetero_target128.exr', '--spp', '32', '--reps', r,
+                           '-o', 'out/bench_grad'],
     }
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
-    print('| job (128², 64 spp) | Penumbra first s | Penumbra warm s | Mitsuba prb first s '
+    print('| job (128²) | Penumbra first s | Penumbra warm s | Mitsuba prb first s '
           '| Mitsuba prb warm s | Mitsuba warm / Penumbra warm | Mitsuba first / Penumbra first |')
     print('|---|---|---|---|---|---|---|')
-    for name, args in jobs.items():
+    for name in a.jobs:
+        args = jobs[name]
         ours = penumbra(args)
         if a.no_mitsuba:
             mi = {'first_s': float('nan'), 'warm_median_s': float('nan')}
         else:
             out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
-                                  '--spp', '64', '--reps', r], capture_output=True, text=True, env=env)
+                                  '--spp', spp.get(name, '64'), '--reps', r],
+                                 capture_output=True, text=True, env=env)
             mi = last_json(out.stdout, 'RESULT ')
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
               f'| {mi["first_s"]:.3f} | {mi["warm_median_s"]:.3f} '
               f'| {mi["warm_median_s"] / ours["warm_median_s"]:.2f} '
               f'| {mi["first_s"] / ours["first_s"]:.2f} |', flush=True)
-    print('\n| max_depth | peak RSS MB (reverse mode, cbox 128², 64 spp) |')
+    memory = {
+        'cbox': ('cbox 128², 64 spp', ['scenes/cbox.xml', '--param', 'red.reflectance.value',
+                                        '--init', '0.4', '--target', 'scenes/refs/cbox_target128.exr',
+                                        '--spp', '64']),
+        'volume_hetero': ('volume_hetero density grid 128², 32 spp',
+                          ['scenes/volume_hetero.xml', '--param', 'medium.sigma_t.data',
+                           '--init', '0.3', '--target', 'scenes/refs/volume_hetero_target128.exr',
+                           '--spp', '32']),
+    }
+    what, args = memory[a.memory]
+    print(f'\n| max_depth | peak RSS MB (reverse mode, {what}) |')
     print('|---|---|')
     for depth in [2, 4, 8, 16, 32, 64]:
-        mb = peak_rss_mb(['scenes/cbox.xml', '-D', 'res=128', '-D', f'max_depth={depth}',
-                          '--param', 'red.reflectance.value', '--init', '0.4', '--target',
-                          'scenes/refs/cbox_target128.exr', '--spp', '64', '-o', 'out/bench_grad'])
+        mb = peak_rss_mb([*args, '-D', 'res=128', '-D', f'max_depth={depth}', '-o', 'out/bench_grad'])
         print(f'| {depth} | {mb:.1f} |', flush=True)
 
 

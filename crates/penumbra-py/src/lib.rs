@@ -229,16 +229,20 @@ struct PyIntegrator {
 #[pymethods]
 impl PyIntegrator {
     fn __repr__(&self) -> String {
+        // Mitsuba's max_depth: -1 for unbounded
+        let depth = |d: u32| if d == u32::MAX { -1 } else { d as i64 };
         match &self.inner {
             Integrator::Path(p) => format!(
                 "Integrator(path, max_depth={}, rr_depth={}, hide_emitters={})",
-                if p.max_depth == u32::MAX {
-                    -1
-                } else {
-                    p.max_depth as i64
-                },
+                depth(p.max_depth),
                 p.rr_depth,
                 p.hide_emitters
+            ),
+            Integrator::VolPath(v) => format!(
+                "Integrator(volpath, max_depth={}, rr_depth={}, hide_emitters={})",
+                depth(v.max_depth),
+                v.rr_depth,
+                v.hide_emitters
             ),
             Integrator::Direct(_) => "Integrator(direct)".into(),
             Integrator::Aov(a) => format!("Integrator(aov, channels={:?})", a.channel_names()),
@@ -342,6 +346,7 @@ fn domain_name(d: Domain) -> &'static str {
         Domain::NonNegative => "nonnegative",
         Domain::Positive => "positive",
         Domain::UnitInterval => "unit_interval",
+        Domain::OpenSignedUnit => "open_signed_unit",
     }
 }
 

@@ -37,6 +37,14 @@ def test_numpy_example_recovers_the_red_wall(tmp_path):
     assert (tmp_path / "final.png").exists()
 
 
+def test_volume_example_recovers_the_density_grid(tmp_path):
+    # 32x32 views, 20 iterations: the grid error must halve (--check)
+    out = run("volume_recovery.py", "--res", "32", "--iterations", "20", "--lr", "0.03",
+              "--out", str(tmp_path))
+    assert "grid mean absolute error" in out
+    assert (tmp_path / "slices.png").exists() and (tmp_path / "density.npy").exists()
+
+
 def test_torch_example_recovers_the_texture():
     pytest.importorskip("torch")
     out = run("optimize_torch.py")

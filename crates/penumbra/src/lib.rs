@@ -16,14 +16,17 @@ pub mod geometry;
 pub mod image;
 pub mod integrator;
 pub mod math;
+pub mod medium;
 pub mod optim;
 pub mod params;
+pub mod phase;
 pub mod sampler;
 pub mod scene;
 pub mod sensor;
 #[cfg(test)]
 pub(crate) mod testing;
 pub mod texture;
+pub mod volume;
 pub mod warn;
 
 pub use error::{Error, Result};

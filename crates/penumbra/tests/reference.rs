@@ -4,6 +4,7 @@
 //!
 
 mod reference_check;
+mod volume_scenes;
 
 use std::path::PathBuf;
 
@@ -18,6 +19,27 @@ fn check(name: &str, reference: &str, ref_spp: u32, spp: u32) {
         &dir.join("refs").join(reference),
         ref_spp,
         Some(spp),
+    ) {
+        panic!("{e}");
+    }
+}
+
+/// [`check`] without the pixels `excluded` says.
+fn check_excluding(
+    name: &str,
+    reference: &str,
+    ref_spp: u32,
+    spp: u32,
+    excluded: &dyn Fn(usize, usize) -> bool,
+) {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    let scene = dir.join(format!("{name}.xml"));
+    if let Err(e) = reference_check::compare_excluding(
+        &scene,
+        &dir.join("refs").join(reference),
+        ref_spp,
+        Some(spp),
+        excluded,
     ) {
         panic!("{e}");
     }
@@ -58,4 +80,28 @@ fn thinlens_matches_mitsuba() {
 #[test]
 fn orthographic_matches_mitsuba() {
     check("orthographic", "orthographic_ref96.exr", 16384, 16);
+}
+
+#[test]
+fn volume_homogeneous_matches_mitsuba() {
+    let excluded = volume_scenes::box_footprint_mask("volume_homog");
+    check_excluding(
+        "volume_homog",
+        "volume_homog_ref256.exr",
+        1024,
+        2,
+        &excluded,
+    );
+}
+
+#[test]
+fn volume_heterogeneous_matches_mitsuba() {
+    let excluded = volume_scenes::box_footprint_mask("volume_hetero");
+    check_excluding(
+        "volume_hetero",
+        "volume_hetero_ref256.exr",
+        512,
+        2,
+        &excluded,
+    );
 }

@@ -14,7 +14,10 @@ Conversion rules (Mitsuba 3's ``load_dict`` conventions):
 - a 3-sequence of numbers -> ``<point>``;
 - a ``Transform4f`` or a 4x4 array -> ``<transform><matrix/></transform>``;
 - ``{'type': 'bitmap', 'data': array}`` (an in-memory texture, linear
-  values) is written to a temporary float EXR file and loaded from there.
+  values) is written to a temporary float EXR file and loaded from there;
+- ``{'type': 'gridvolume', 'data': array}`` (a grid of shape
+  ``[z, y, x]`` or ``[z, y, x, c]``, c = 1 or 3, as Mitsuba's ``TensorXf``
+  data) is written to a temporary Mitsuba ``.vol`` file.
 """
 
 from __future__ import annotations
@@ -41,14 +44,26 @@ for _cls, _names in {
     "rfilter": "box tent gaussian mitchell catmullrom lanczos",
     "sampler": "independent stratified multijitter orthogonal ldsampler",
     "integrator": "path direct aov prb prb_basic direct_projective prb_projective volpath "
-    "volpathmis ptracer depth moment stokes",
+    "volpathmis prbvolpath ptracer depth moment stokes",
     "medium": "homogeneous heterogeneous",
     "phase": "isotropic hg rayleigh sggx",
+    "volume": "constvolume gridvolume",
 }.items():
     for _n in _names.split():
         PLUGIN_CLASS[_n] = _cls
 
-INTEGRATORS = ("path", "prb", "prb_basic", "prb_projective", "direct", "direct_projective", "aov")
+INTEGRATORS = (
+    "path",
+    "prb",
+    "prb_basic",
+    "prb_projective",
+    "direct",
+    "direct_projective",
+    "aov",
+    "volpath",
+    "volpathmis",
+    "prbvolpath",
+)
 
 
 def quoteattr(s):
@@ -181,6 +196,8 @@ class _Writer:
         body = {k: v for k, v in d.items() if k not in ("type", "id")}
         if t == "bitmap" and "data" in body:
             body = self.bitmap_data(body, path)
+        if t == "gridvolume" and "data" in body:
+            body = self.grid_data(body, path)
         if not body:
             self.emit(indent, f"<{cls} {attrs}/>", path)
             return
@@ -208,6 +225,36 @@ class _Writer:
         d = self.tmpdir_factory()
         fname = os.path.join(d, f"bitmap_{len(os.listdir(d))}.exr")
         _core.write_image(fname, a)
+        out = {k: v for k, v in body.items() if k != "data"}
+        return {"filename": fname, **out}
+
+
+    def grid_data(self, body, path):
+        if "filename" in body:
+            raise DictError(f"{_path_str(path)}: give either 'data' or 'filename', not both")
+        where = _path_str(path + ("data",))
+        a = np.asarray(body["data"])
+        if not np.issubdtype(a.dtype, np.floating) and not np.issubdtype(a.dtype, np.integer):
+            raise DictError(f"{where}: expected a float array")
+        a = np.ascontiguousarray(a, dtype=np.float32)
+        if a.ndim == 3:
+            a = a[..., None]
+        if a.ndim != 4 or a.shape[3] not in (1, 3) or min(a.shape) < 1:
+            raise DictError(
+                f"{where}: expected shape [z, y, x] or [z, y, x, c] with c = 1 or 3, "
+                f"got {a.shape}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise DictError(f"{where}: the grid has non-finite values")
+        d = self.tmpdir_factory()
+        fname = os.path.join(d, f"grid_{len(os.listdir(d))}.vol")
+        z, y, x, c = a.shape
+        # Mitsuba's .vol format: 'VOL', version 3, encoding 1 (float32),
+        # resolution x, y, z, channels, bounding box, data x fastest
+        header = b"VOL\x03" + np.array([1, x, y, z, c], "<i4").tobytes()
+        header += np.array([0, 0, 0, 1, 1, 1], "<f4").tobytes()
+        with open(fname, "wb") as f:
+            f.write(header + a.astype("<f4").tobytes())
         out = {k: v for k, v in body.items() if k != "data"}
         return {"filename": fname, **out}
 

@@ -15,7 +15,7 @@ ParamInfo.__doc__ = """What a parameter is: its shape, whether derivatives with 
 are computed (differentiable), whether it moves visibility (discontinuous:
 geometry, its derivatives need boundary terms), whether it can be set
 (read_only), and the range its values must lie in (domain: 'finite',
-'nonnegative', 'positive' or 'unit_interval')."""
+'nonnegative', 'positive', 'unit_interval' or 'open_signed_unit')."""
 
 
 def as_float_array(value, key, shape, what="value"):

@@ -20,9 +20,9 @@ pub use forward::render_forward;
 pub use prb::{render_backward, GradEntry, Gradients};
 
 use crate::emitter::EmitterT;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::Shape;
-use crate::integrator::RenderOptions;
+use crate::integrator::{Integrator, RenderOptions};
 use crate::scene::Scene;
 
 /// The seed of a gradient pass (reverse or forward mode) that follows a
@@ -93,6 +93,15 @@ pub(crate) fn warn_missing_boundary_terms(
     }
     if moving.is_empty() {
         return Ok(false);
+    }
+    if let Integrator::VolPath(_) = scene.integrator {
+        return Err(Error::Invalid(format!(
+            "{} moves geometry or the camera: the volumetric path tracer differentiates \
+             media, materials and emitters, not geometry (its boundary terms and moving \
+             paths through media are not implemented); differentiate other parameters, or \
+             use the path integrator for a scene without media",
+            moving.join(", ")
+        )));
     }
     let analytic = |s: &Shape| s.as_mesh().is_none();
     let mut missing = Vec::new();

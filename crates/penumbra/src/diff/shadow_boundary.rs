@@ -103,7 +103,8 @@ pub(super) fn first_vertex_is_lit(scene: &Scene, opts: &RenderOptions) -> Result
     let lit = match &scene.integrator {
         Integrator::Path(p) => p.max_depth >= 2,
         Integrator::Direct(_) => true,
-        Integrator::Aov(_) | Integrator::Moment(_) => false,
+        // media refuse geometry derivatives
+        Integrator::VolPath(_) | Integrator::Aov(_) | Integrator::Moment(_) => false,
     };
     Ok(opts.sppi != Some(0) && lit && sensor.projector::<f32>(&scene.params.primal()).is_some())
 }

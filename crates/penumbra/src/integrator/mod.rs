@@ -7,6 +7,7 @@ mod direct;
 mod moment;
 pub(crate) mod path;
 pub(crate) mod render;
+mod volpath;
 
 pub use aov::{AovIntegrator, AovKind};
 pub use budgets::Budgets;
@@ -14,6 +15,7 @@ pub use direct::DirectIntegrator;
 pub use moment::MomentIntegrator;
 pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
+pub use volpath::VolPathIntegrator;
 
 use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
@@ -38,6 +40,8 @@ pub enum Integrator {
     Direct(DirectIntegrator),
     Aov(AovIntegrator),
     Moment(MomentIntegrator),
+    /// `volpath`, `volpathmis`, `prbvolpath`: participating media.
+    VolPath(VolPathIntegrator),
 }
 
 impl Integrator {
@@ -58,16 +62,15 @@ impl Integrator {
             }
             "aov" => Integrator::Aov(AovIntegrator::from_node(node)?),
             "moment" => Integrator::Moment(MomentIntegrator::from_node(node)?),
-            "volpath" | "volpathmis" | "prbvolpath" => {
-                return Err(node.error(
-                    "renders participating media, which are not supported yet; for surfaces, \
-                     use the 'path' integrator (same parameters)",
-                ))
+            "volpath" | "volpathmis" => {
+                Integrator::VolPath(VolPathIntegrator::from_node(node, -1)?)
             }
+            "prbvolpath" => Integrator::VolPath(VolPathIntegrator::from_node(node, 6)?),
             other => {
                 return Err(node.error(format!(
                     "unknown integrator plugin '{other}' (Penumbra has: path, prb, prb_basic, \
-                     prb_projective, direct, direct_projective, aov, moment)"
+                     prb_projective, direct, direct_projective, aov, moment, volpath, \
+                     volpathmis, prbvolpath)"
                 )))
             }
         };
@@ -80,6 +83,7 @@ impl Integrator {
         match self {
             Integrator::Path(p) => p.budgets,
             Integrator::Direct(d) => d.budgets,
+            Integrator::VolPath(v) => v.budgets(),
             Integrator::Aov(_) | Integrator::Moment(_) => Budgets::default(),
         }
     }
@@ -127,7 +131,7 @@ impl Integrator {
         let name = match self {
             Integrator::Aov(_) => "aov",
             Integrator::Moment(_) => "moment",
-            Integrator::Path(_) | Integrator::Direct(_) => return Ok(()),
+            Integrator::Path(_) | Integrator::Direct(_) | Integrator::VolPath(_) => return Ok(()),
         };
         Err(crate::Error::Invalid(format!(
             "the {name} integrator has no derivatives; use path or direct"
@@ -146,7 +150,7 @@ impl Integrator {
         match self {
             Integrator::Aov(a) => return a.sample(scene, cs, rng, out),
             Integrator::Moment(m) => return m.sample(scene, cs, rng, out),
-            Integrator::Path(_) | Integrator::Direct(_) => {}
+            Integrator::Path(_) | Integrator::Direct(_) | Integrator::VolPath(_) => {}
         }
         let rgb = self
             .radiance::<f32>(scene, &scene.params.primal(), cs, rng)
@@ -172,6 +176,7 @@ impl Integrator {
         match self {
             Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng)),
             Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
+            Integrator::VolPath(v) => Some(v.sample::<R>(scene, store, cs, rng)),
             Integrator::Aov(_) | Integrator::Moment(_) => None,
         }
     }
@@ -210,7 +215,8 @@ impl Integrator {
                         .val()
                 }),
             },
-            Integrator::Aov(_) | Integrator::Moment(_) => glam::Vec3::ZERO,
+            // media refuse geometry derivatives, which this serves
+            Integrator::VolPath(_) | Integrator::Aov(_) | Integrator::Moment(_) => glam::Vec3::ZERO,
         }
     }
 

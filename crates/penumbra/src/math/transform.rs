@@ -42,6 +42,14 @@ impl Transform {
         }
     }
 
+    /// Scaling by `s` along the axes.
+    pub fn scale(s: Vec3) -> Transform {
+        Transform {
+            m: Mat4::from_scale(s),
+            inv: Mat4::from_scale(s.recip()),
+        }
+    }
+
     /// Rotation by `angle_deg` degrees about `axis` (right-handed).
     pub fn rotate(axis: Vec3, angle_deg: f32) -> Transform {
         let m = Mat4::from_axis_angle(axis.normalize(), angle_deg.to_radians());

@@ -11,6 +11,10 @@ use std::collections::HashMap;
 /// (roughness, index of refraction).
 const MIN_POSITIVE: f32 = 1e-3;
 
+/// The largest |g| kept for phase-function anisotropies (the phase
+/// function becomes a delta at 1).
+const MAX_ANISOTROPY: f32 = 0.999;
+
 /// Clamps `v` into `domain`.
 pub fn project(v: f32, domain: Domain) -> f32 {
     match domain {
@@ -18,6 +22,7 @@ pub fn project(v: f32, domain: Domain) -> f32 {
         Domain::NonNegative => v.max(0.0),
         Domain::Positive => v.max(MIN_POSITIVE),
         Domain::UnitInterval => v.clamp(0.0, 1.0),
+        Domain::OpenSignedUnit => v.clamp(-MAX_ANISOTROPY, MAX_ANISOTROPY),
     }
 }
 

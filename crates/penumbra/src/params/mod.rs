@@ -79,6 +79,9 @@ pub enum Domain {
     Positive,
     /// In [0, 1] (reflectance, albedo, blend weights).
     UnitInterval,
+    /// In (-1, 1): the mean cosine of a phase function (Henyey-Greenstein
+    /// `g`; ±1 would be a delta).
+    OpenSignedUnit,
 }
 
 impl Domain {
@@ -90,6 +93,7 @@ impl Domain {
                 Domain::NonNegative => v >= 0.0,
                 Domain::Positive => v > 0.0,
                 Domain::UnitInterval => (0.0..=1.0).contains(&v),
+                Domain::OpenSignedUnit => v > -1.0 && v < 1.0,
             }
     }
     /// The domain in words ("in [0, 1]"), for messages.
@@ -99,6 +103,7 @@ impl Domain {
             Domain::NonNegative => "finite and >= 0",
             Domain::Positive => "finite and > 0",
             Domain::UnitInterval => "in [0, 1]",
+            Domain::OpenSignedUnit => "in (-1, 1)",
         }
     }
 }

@@ -10,6 +10,7 @@ use crate::geometry::accel::Accel;
 use crate::geometry::Shape;
 use crate::integrator::{Integrator, PathIntegrator};
 use crate::math::DiscreteDistribution;
+use crate::medium::Medium;
 use crate::sensor::Sensor;
 use crate::texture::MeshAttribute;
 use std::collections::HashMap;
@@ -30,6 +31,8 @@ struct Builder {
     emitter_weights: Vec<f32>,
     environment: Option<u32>,
     sensors: Vec<Sensor>,
+    media: Vec<Medium>,
+    medium_of_node: HashMap<*const Node, u32>,
     integrator: Option<Integrator>,
 }
 
@@ -77,6 +80,50 @@ impl Builder {
         self.new_bsdf(&node)
     }
 
+    /// The medium built from `node` (once per node: a medium referenced by
+    /// several shapes is one medium).
+    fn medium(&mut self, node: &Rc<Node>) -> Result<u32> {
+        if let Some(&i) = self.medium_of_node.get(&Rc::as_ptr(node)) {
+            return Ok(i);
+        }
+        let m = Medium::from_node(node, &mut self.ctx)?;
+        self.media.push(m);
+        let i = self.media.len() as u32 - 1;
+        self.medium_of_node.insert(Rc::as_ptr(node), i);
+        Ok(i)
+    }
+
+    /// The medium a shape names as `interior` or `exterior`, if any.
+    fn shape_medium(&mut self, shape: &Node, side: &str) -> Result<Option<u32>> {
+        let Some(n) = shape.child(side)? else {
+            return Ok(None);
+        };
+        if n.class != Class::Medium {
+            let p = shape.prop(side).expect("a child came from a property");
+            return Err(shape.prop_error(
+                p,
+                format!("must be a <medium>, found a <{}>", n.class.tag()),
+            ));
+        }
+        self.medium(&n).map(Some)
+    }
+
+    /// A sensor and the medium it sits in (a nested `<medium>` or a
+    /// reference to one, under any name, as in Mitsuba).
+    fn sensor(&mut self, node: &Node) -> Result<()> {
+        let medium = match node.child_props(Class::Medium).as_slice() {
+            [] => None,
+            [(_, m)] => Some(self.medium(m)?),
+            [_, (p, _), ..] => {
+                return Err(node.prop_error(p, "a sensor sits in one medium; remove the others"))
+            }
+        };
+        let mut sensor = Sensor::from_node(node, &mut self.ctx.store)?;
+        sensor.medium = medium;
+        self.sensors.push(sensor);
+        Ok(())
+    }
+
     fn emitter(&mut self, node: &Node, shape: Option<u32>) -> Result<u32> {
         let (e, weight) = Emitter::from_node_weighted(node, shape, &mut self.ctx)?;
         node.check_all_used()?;
@@ -104,6 +151,8 @@ impl Builder {
             Some(e) => Some(self.emitter(&e, Some(index))?),
             None => None,
         };
+        let interior = self.shape_medium(node, "interior")?;
+        let exterior = self.shape_medium(node, "exterior")?;
         node.check_all_used()?;
         // the area emitter's textures are evaluated on this shape too
         let emitter_uses = std::mem::take(&mut self.ctx.attribute_uses);
@@ -123,35 +172,17 @@ impl Builder {
             key: node.key.clone(),
             bsdf,
             emitter,
+            interior,
+            exterior,
         });
         Ok(())
     }
-}
-
-/// Refuses a scene that uses participating media (not implemented yet) at
-/// the first medium, phase function or volume, whether declared at the top
-/// level or inside a shape (`interior`, `exterior`) or a sensor, before
-/// anything is built.
-fn refuse_media(node: &Node) -> Result<()> {
-    if matches!(node.class, Class::Medium | Class::Phase | Class::Volume) {
-        return Err(node.error(
-            "participating media are not supported yet (Penumbra renders surfaces only); \
-             remove the medium and the references to it (interior, exterior)",
-        ));
-    }
-    for p in &node.props {
-        if let Value::Node(child) = &p.value {
-            refuse_media(child)?;
-        }
-    }
-    Ok(())
 }
 
 impl Scene {
     /// Builds a scene from a parsed scene description.
     pub fn from_description(desc: &SceneDescription) -> Result<Scene> {
         let root = &*desc.root;
-        refuse_media(root)?;
         let mut b = Builder {
             ctx: LoadContext {
                 resolver: desc.resolver.clone(),
@@ -166,6 +197,8 @@ impl Scene {
             emitter_weights: Vec::new(),
             environment: None,
             sensors: Vec::new(),
+            media: Vec::new(),
+            medium_of_node: HashMap::new(),
             integrator: None,
         };
         for p in &root.props {
@@ -185,7 +218,10 @@ impl Scene {
                         return Err(t.outside_mesh_error());
                     }
                 }
-                Class::Sensor => b.sensors.push(Sensor::from_node(&node, &mut b.ctx.store)?),
+                Class::Sensor => b.sensor(&node)?,
+                Class::Medium => {
+                    b.medium(&node)?;
+                }
                 Class::Integrator => {
                     if b.integrator.is_some() {
                         return Err(node.error("a scene can have only one <integrator>"));
@@ -194,8 +230,11 @@ impl Scene {
                 }
                 // textures are built where they are used (and shared there)
                 Class::Texture => {}
-                Class::Medium | Class::Phase | Class::Volume => {
-                    unreachable!("refused by refuse_media")
+                Class::Phase | Class::Volume => {
+                    return Err(node.error(format!(
+                        "a <{}> belongs inside a <medium>, not at the top level",
+                        node.class.tag()
+                    )))
                 }
                 Class::Spectrum => unreachable!("spectra are property values"),
                 Class::Film | Class::Rfilter | Class::Sampler | Class::Scene => {
@@ -236,6 +275,7 @@ impl Scene {
             emitters: b.emitters,
             environment: b.environment,
             sensors: b.sensors,
+            media: b.media,
             integrator: b.integrator.unwrap_or(Integrator::Path(PathIntegrator {
                 max_depth: u32::MAX,
                 rr_depth: 5,
@@ -253,23 +293,23 @@ mod tests {
     use std::path::Path;
 
     #[test]
-    fn participating_media_are_refused_in_one_line() {
+    fn medium_errors_name_file_line_and_problem() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bad_scenes");
         for (file, line, needle) in [
             (
                 "medium_interior.xml",
                 6,
-                "medium 'homogeneous' (id 'fog'): participating media",
+                "medium 'fog' (id 'fog'): unknown medium plugin 'fog'",
             ),
             (
                 "medium_sensor.xml",
                 9,
-                "medium 'homogeneous': participating media",
+                "medium 'homogeneous', parameter 'sigma_t': a homogeneous medium needs a constant",
             ),
             (
-                "volpath.xml",
-                3,
-                "integrator 'volpath': renders participating media",
+                "medium_missing_grid.xml",
+                8,
+                "volume 'gridvolume', parameter 'filename': file 'missing.vol' not found",
             ),
         ] {
             let p = dir.join(file);

@@ -67,7 +67,8 @@ use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
 use crate::geometry::{DiffRay, Hit, Ray, Shape, ShapeT, SurfaceInteraction};
 use crate::integrator::Integrator;
-use crate::math::DiscreteDistribution;
+use crate::math::{DiscreteDistribution, V3};
+use crate::medium::Medium;
 use crate::sensor::Sensor;
 use glam::{Vec2, Vec3};
 use std::path::Path;
@@ -83,6 +84,10 @@ pub struct ShapeInfo {
     pub key: String,
     pub bsdf: u32,
     pub emitter: Option<u32>,
+    /// The media inside and outside the shape (indices into
+    /// [`Scene::media`]); outside is the side the normal points to.
+    pub interior: Option<u32>,
+    pub exterior: Option<u32>,
 }
 
 /// A loaded scene: parameters, plugins, and the acceleration structure.
@@ -99,6 +104,8 @@ pub struct Scene {
     pub environment: Option<u32>,
     /// The sensors, in file order (`RenderOptions::sensor` picks one).
     pub sensors: Vec<Sensor>,
+    /// The participating media (shapes' `interior`/`exterior`, sensors').
+    pub media: Vec<Medium>,
     pub integrator: Integrator,
     pub accel: Accel,
 }
@@ -190,21 +197,35 @@ impl Scene {
     }
 
     /// Samples an emitter (by `sampling_weight`), then a direction towards
-    /// it from `si`, and tests visibility. Returns the sample with its
-    /// weight `radiance / pdf` (including the selection probability), in
-    /// `R` following `si.p` and the emitter, or `None` if occluded.
+    /// it from `ref_p`, without testing visibility. Returns the sample with
+    /// its weight `radiance / pdf` and density including the selection
+    /// probability, in `R` following `ref_p` and the emitter.
+    pub fn sample_emitter<R: Real>(
+        &self,
+        store: &ParamView,
+        ref_p: V3<R>,
+        u: Vec2,
+    ) -> Option<EmitterSample<R>> {
+        let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
+        let u = Vec2::new(ux, u.y);
+        let mut es = self.emitters[i].sample_direction::<R>(store, &self.shapes, ref_p, u)?;
+        if !(es.ds.pdf > 0.0) {
+            return None;
+        }
+        es.ds.pdf *= pick;
+        es.weight = es.weight.scale(1.0 / pick);
+        Some(es)
+    }
+
+    /// [`Scene::sample_emitter`] from `si`, and tests visibility: `None` if
+    /// occluded.
     pub fn sample_emitter_direction<R: Real>(
         &self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
         u: Vec2,
     ) -> Option<EmitterSample<R>> {
-        let (i, pick, ux) = self.emitter_distribution.as_ref()?.sample_reuse(u.x);
-        let u = Vec2::new(ux, u.y);
-        let mut es = self.emitters[i].sample_direction::<R>(store, &self.shapes, si.p, u)?;
-        if !(es.ds.pdf > 0.0) {
-            return None;
-        }
+        let es = self.sample_emitter(store, si.p, u)?;
         let ray = if es.ds.dist.is_finite() {
             si.spawn_ray_to(es.ds.p)
         } else {
@@ -213,8 +234,6 @@ impl Scene {
         if self.occluded(&ray) {
             return None;
         }
-        es.ds.pdf *= pick;
-        es.weight = es.weight.scale(1.0 / pick);
         Some(es)
     }
 
@@ -257,6 +276,9 @@ impl Scene {
         }
         for b in &mut self.bsdfs {
             b.parameters_changed(&self.params);
+        }
+        for m in &mut self.media {
+            m.parameters_changed(&self.params);
         }
         for s in &self.sensors {
             s.parameters_changed(&self.params)?;

@@ -74,6 +74,9 @@ pub struct Sensor {
     pub camera: Camera,
     pub film: Film,
     pub sampler: Sampler,
+    /// The medium the sensor sits in (an index into the scene's media),
+    /// set by the scene builder.
+    pub medium: Option<u32>,
     pose: Pose,
 }
 
@@ -184,6 +187,7 @@ impl Sensor {
             camera,
             film,
             sampler,
+            medium: None,
             pose,
         };
         sensor

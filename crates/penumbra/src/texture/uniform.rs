@@ -41,13 +41,21 @@ impl Uniform {
     }
 }
 
-impl TextureT for Uniform {
+impl Uniform {
+    /// The value (a mono value on all three channels).
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    pub fn value<R: Real>(&self, store: &ParamView) -> Spectrum<R> {
         match self.channels {
             Channels::Mono => V3::splat(store.read(self.id, 0)),
             Channels::Rgb => store.read3(self.id, 0),
         }
+    }
+}
+
+impl TextureT for Uniform {
+    #[inline]
+    fn eval<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
+        self.value(store)
     }
     #[inline]
     fn eval_1<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> R {

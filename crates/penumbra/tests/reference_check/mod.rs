@@ -98,6 +98,19 @@ pub fn compare(
     ref_spp: u32,
     spp: Option<u32>,
 ) -> Result<(), String> {
+    compare_excluding(scene_path, ref_path, ref_spp, spp, &|_, _| false)
+}
+
+/// [`compare`], leaving out the pixels `(x, y)` for which `excluded` is
+/// true (where the image is not defined by the scene alone, e.g. coplanar
+/// surfaces whose order rounding decides).
+pub fn compare_excluding(
+    scene_path: &Path,
+    ref_path: &Path,
+    ref_spp: u32,
+    spp: Option<u32>,
+    excluded: &dyn Fn(usize, usize) -> bool,
+) -> Result<(), String> {
     let name = scene_path.file_stem().unwrap_or_default().to_string_lossy();
     let scene =
         Scene::load_file(scene_path, &[]).map_err(|e| format!("{}: {e}", scene_path.display()))?;
@@ -119,14 +132,19 @@ pub fn compare(
         .into_iter()
         .chain([(0, h / 2, w / 2, h), (w / 2, h / 2, w, h)])
         .collect::<Vec<_>>();
+    let kept: Vec<bool> = (0..w * h).map(|p| !excluded(p % w, p / w)).collect();
     let region_mean = |img: &[f32], &(x0, y0, x1, y1): &(usize, usize, usize, usize)| {
-        let mut s = 0.0;
+        let (mut s, mut n) = (0.0, 0usize);
         for y in y0..y1 {
-            for v in &img[(y * w + x0) * 3..(y * w + x1) * 3] {
-                s += *v as f64;
+            for x in (x0..x1).filter(|&x| kept[y * w + x]) {
+                s += img[(y * w + x) * 3..][..3]
+                    .iter()
+                    .map(|&v| v as f64)
+                    .sum::<f64>();
+                n += 3;
             }
         }
-        s / ((x1 - x0) * (y1 - y0) * 3) as f64
+        s / n as f64
     };
     let mut batch_means = vec![Vec::new(); regions.len()];
     for k in 0..BATCHES {
@@ -164,7 +182,9 @@ pub fn compare(
     let mut tile_excess = vec![0.0f64; tiles_x * tiles_y];
     let mut tile_count = vec![0usize; tiles_x * tiles_y];
     let (mut rel_mse, mut expected) = (0.0, 0.0);
-    for i in 0..len {
+    let mut counted = 0usize;
+    for i in (0..len).filter(|i| kept[i / 3]) {
+        counted += 1;
         let mean = sum[i] / kf;
         let batch_var = ((sum_sq[i] - kf * mean * mean) / (kf - 1.0)).max(0.0);
         let rv = r.data[i] as f64;
@@ -178,11 +198,12 @@ pub fn compare(
         tile_excess[t] += d - e;
         tile_count[t] += 1;
     }
-    rel_mse /= len as f64;
-    expected /= len as f64;
+    rel_mse /= counted as f64;
+    expected /= counted as f64;
     let tile_means: Vec<f64> = tile_excess
         .iter()
         .zip(&tile_count)
+        .filter(|(_, &c)| c > 0)
         .map(|(s, &c)| s / c as f64)
         .collect();
     let (excess, tile_var) = mean_var(&tile_means);

@@ -92,7 +92,7 @@ pub enum Value {
 }
 
 impl Value {
-    fn kind(&self) -> &'static str {
+    pub(crate) fn kind(&self) -> &'static str {
         match self {
             Value::Float(_) => "float",
             Value::Int(_) => "integer",

@@ -1001,10 +1001,7 @@ fn transform(c: &Elem) -> Result<Transform> {
                 if s.x * s.y * s.z == 0.0 {
                     return Err(op.err(format!("<scale> by {s} is singular (a zero scale factor)")));
                 }
-                Transform {
-                    m: Mat4::from_scale(s),
-                    inv: Mat4::from_scale(s.recip()),
-                }
+                Transform::scale(s)
             }
             "matrix" => {
                 op.check_attrs(&["value"])?;
