@@ -225,16 +225,15 @@ impl Disk {
         let rr = (x * x + y * y).safe_sqrt();
         let phi = azimuth(y, x);
         let uv = V2::new(rr, phi * (0.5 / PI));
-        // Mitsuba's disk.cpp: the radial and azimuthal unit directions
-        // mapped by `to_world`; ∂p/∂v is not scaled by 2π r (it is the
-        // azimuthal direction, not the derivative in v).
+        // p = a0 r cos 2πv + a1 r sin 2πv (plus the centre), with the
+        // local x direction at the centre, as Mitsuba's disk.cpp
         let (cos_phi, sin_phi) = if rr.val() > 0.0 {
             (x / rr, y / rr)
         } else {
             (R::cst(1.0), R::cst(0.0))
         };
         let dp_du = a0 * cos_phi + a1 * sin_phi;
-        let dp_dv = a1 * cos_phi - a0 * sin_phi;
+        let dp_dv = (a1 * cos_phi - a0 * sin_phi) * (rr * (2.0 * PI));
         let mut n = nv.normalize() * R::cst(self.normal_sign());
         if self.flip_normals {
             n = -n;
