@@ -292,7 +292,7 @@ fn principled_parameters() {
     }
 }
 
-/// A normal-mapped roughplastic sphere and a bump-mapped diffuse floor
+/// A normal-mapped roughconductor sphere and a bump-mapped diffuse floor
 /// (the conformance set's textures), in the surfaces scene's light.
 fn perturbed_normals_scene() -> Scene {
     let assets = repo().join("scenes/conformance/assets");
@@ -317,7 +317,7 @@ fn perturbed_normals_scene() -> Scene {
                 <string name="filename" value="{}"/>
                 <boolean name="raw" value="true"/>
             </texture>
-            <bsdf type="roughplastic"><float name="alpha" value="0.2"/></bsdf>
+            <bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf>
         </bsdf>
     </shape>
     <shape type="rectangle" id="light">
@@ -337,7 +337,7 @@ fn normal_and_bump_map_parameters() {
     let mut scene = perturbed_normals_scene();
     for key in [
         "dents.normalmap.data",
-        "dents.nested_bsdf.alpha",
+        "dents.nested_bsdf.alpha.value",
         "bumps.nested_texture.data",
         "bumps.scale",
         "bumps.nested_bsdf.reflectance.value",

@@ -207,7 +207,8 @@ mod tests {
         let s = Vec3::new(n.z, 0.0, -n.x);
         let local = |v: Vec3| Vec3::new(v.dot(s), v.y, v.dot(n));
         // times the bump-terminator shadowing: α² = ⅛ tan² θn = 1/32
-        let shadowing = |wo: Vec3| 2.0 / (1.0 + (1.0 + (1.0 - wo.z * wo.z) / (wo.z * wo.z) / 32.0).sqrt());
+        let shadowing =
+            |wo: Vec3| 2.0 / (1.0 + (1.0 + (1.0 - wo.z * wo.z) / (wo.z * wo.z) / 32.0).sqrt());
         for wo in [dir(0.5, 1.0), dir(0.9, -2.0)] {
             let f = eval_f32(&b, &store, wi, wo);
             let g = eval_f32(&plain, &plain_store, local(wi), local(wo)) * shadowing(wo);

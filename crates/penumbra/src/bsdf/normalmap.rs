@@ -4,8 +4,8 @@
 //! `bumpmap`, which only derives the normal differently.
 
 use super::{
-    nested_bsdfs, smooth_sample, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT,
-    NestedContext, NodeContext,
+    nested_bsdfs, smooth_sample, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NestedContext,
+    NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
@@ -62,7 +62,8 @@ impl NormalMap {
             "normalmap",
             None,
             Channels::Rgb,
-            Domain::UnitInterval,
+            // any finite encoding decodes to a direction (it is normalised)
+            Domain::Finite,
             ctx,
         )?;
         let options = Perturbation::from_node(node)?;
@@ -246,7 +247,10 @@ mod tests {
     use crate::texture::TextureT;
     use glam::Vec3;
 
-    fn normalmap(rgb_value: (f32, f32, f32), nested_plugin: &str) -> (Bsdf, crate::params::ParamStore) {
+    fn normalmap(
+        rgb_value: (f32, f32, f32),
+        nested_plugin: &str,
+    ) -> (Bsdf, crate::params::ParamStore) {
         let n = node_with_key(
             "normalmap",
             "nm",

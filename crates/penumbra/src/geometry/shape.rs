@@ -427,7 +427,10 @@ mod tests {
                 let si = at(o, d);
                 let (p0, uv0) = (si.p.val(), si.uv.val());
                 let (du, dv) = (si.dp_du.val(), si.dp_dv.val());
-                for offset in [d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector())] {
+                for offset in [
+                    d.any_orthonormal_vector(),
+                    d.cross(d.any_orthonormal_vector()),
+                ] {
                     let sj = at(o + offset * eps, d);
                     let (dp, duv) = (sj.p.val() - p0, sj.uv.val() - uv0);
                     if sj.prim != si.prim || duv.abs().max_element() > 0.5 {
@@ -444,12 +447,20 @@ mod tests {
                     checked += 1;
                 }
             }
-            assert!(checked >= 2, "{}: only {checked} differences checked", n.plugin);
+            assert!(
+                checked >= 2,
+                "{}: only {checked} differences checked",
+                n.plugin
+            );
         }
 
         let mut store = ParamStore::default();
         let triangle = crate::geometry::mesh::MeshData {
-            positions: vec![Vec3::ZERO, Vec3::new(1.0, 0.2, 0.0), Vec3::new(0.3, 1.0, 0.4)],
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.2, 0.0),
+                Vec3::new(0.3, 1.0, 0.4),
+            ],
             normals: None,
             texcoords: None,
             faces: vec![[0, 1, 2]],
@@ -459,8 +470,16 @@ mod tests {
             face_normals: true,
             flip_normals: false,
         };
-        let m = Mesh::new("ply", "m", "t.ply", triangle, &Transform::IDENTITY, opts, &mut store)
-            .unwrap();
+        let m = Mesh::new(
+            "ply",
+            "m",
+            "t.ply",
+            triangle,
+            &Transform::IDENTITY,
+            opts,
+            &mut store,
+        )
+        .unwrap();
         let s = Shape::Mesh(m);
         let ray = Ray::new(Vec3::new(0.4, 0.4, 3.0), -Vec3::Z);
         let h = hit_of(&s, &store, &ray);
