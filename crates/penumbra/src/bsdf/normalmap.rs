@@ -225,7 +225,7 @@ impl<R: Real> PerturbedFrameContext<R> {
             return smooth_sample(&this, wo.val(), bs.eta, bs.lobe);
         }
         if self.shadowing {
-            bs.weight = bs.weight * shadow_terminator(self.frame.n, wo);
+            bs.weight *= shadow_terminator(self.frame.n, wo);
         }
         bs.wo = wo;
         Some(bs)
@@ -305,6 +305,7 @@ mod tests {
     /// 0.6) (none within 0.1 of grazing either frame, where roughplastic's
     /// tables differ); the zero rows are directions the guards reject.
     #[rustfmt::skip]
+    #[allow(clippy::excessive_precision)]
     const MITSUBA_ROWS: &[MitsubaRow] = &[
     ("tilted", [5.73201893e-01, 1.77312124e-01, 8.00000000e-01], [4.67915523e-01, 7.28735249e-01, 5.00000000e-01], [6.86106235e-02, 6.86106235e-02, 6.86106235e-02], 1.41669899e-01),
     ("tilted", [-3.32917469e-01, 7.27437941e-01, 6.00000000e-01], [-1.81394201e-01, -3.96353559e-01, 9.00000000e-01], [9.03285667e-02, 9.03285667e-02, 9.03285667e-02], 1.38224736e-01),
