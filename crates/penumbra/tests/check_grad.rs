@@ -1,8 +1,9 @@
 //! Finite differences (identical random numbers) vs forward mode vs reverse
 //! mode (path replay), for every kind of differentiable parameter: diffuse
 //! reflectance, bitmap texels, mesh attributes, roughness, conductor η and
-//! k, specular reflectance, area / constant / envmap / point emission, and
-//! every parameter of the principled and thin principled BSDFs.
+//! k, specular reflectance, area / constant / envmap / point emission,
+//! every parameter of the principled and thin principled BSDFs, and the
+//! normal map, height map and scale of `normalmap` and `bumpmap`.
 //!
 //! Forward and reverse mode differentiate the very same estimate, so they
 //! must agree to rounding. Finite differences are an independent estimate
@@ -286,6 +287,60 @@ fn principled_parameters() {
         "thin.sheen.value",
         "thin.sheen_tint.value",
         "thin.flatness.value",
+    ] {
+        check(&mut scene, key);
+    }
+}
+
+/// A normal-mapped roughconductor sphere and a bump-mapped diffuse floor
+/// (the conformance set's textures), in the surfaces scene's light.
+fn perturbed_normals_scene() -> Scene {
+    let assets = repo().join("scenes/conformance/assets");
+    let xml = format!(
+        r#"{HEADER}
+    <shape type="rectangle" id="floor">
+        <transform name="to_world"><scale value="2"/><rotate x="1" angle="-90"/></transform>
+        <bsdf type="bumpmap" id="bumps">
+            <texture type="bitmap" name="height">
+                <string name="filename" value="{}"/>
+                <boolean name="raw" value="true"/>
+            </texture>
+            <float name="scale" value="0.05"/>
+            <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf>
+        </bsdf>
+    </shape>
+    <shape type="sphere" id="ball">
+        <point name="center" x="0" y="0.6" z="0"/>
+        <float name="radius" value="0.6"/>
+        <bsdf type="normalmap" id="dents">
+            <texture type="bitmap" name="normalmap">
+                <string name="filename" value="{}"/>
+                <boolean name="raw" value="true"/>
+            </texture>
+            <bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf>
+        </bsdf>
+    </shape>
+    <shape type="rectangle" id="light">
+        <transform name="to_world"><scale value="0.5"/><lookat origin="1, 3, 1" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <emitter type="area"><rgb name="radiance" value="10, 9, 8"/></emitter>
+    </shape>
+    <emitter type="constant" id="sky"><rgb name="radiance" value="0.3, 0.35, 0.4"/></emitter>
+</scene>"#,
+        assets.join("heightmap.png").display(),
+        assets.join("normalmap.png").display()
+    );
+    Scene::load_str(&xml, Path::new("perturbed_normals.xml"), &[]).unwrap()
+}
+
+#[test]
+fn normal_and_bump_map_parameters() {
+    let mut scene = perturbed_normals_scene();
+    for key in [
+        "dents.normalmap.data",
+        "dents.nested_bsdf.alpha.value",
+        "bumps.nested_texture.data",
+        "bumps.scale",
+        "bumps.nested_bsdf.reflectance.value",
     ] {
         check(&mut scene, key);
     }

@@ -10,12 +10,14 @@
 //! `R` like its weight.
 
 mod blendbsdf;
+mod bumpmap;
 mod conductor;
 mod dielectric;
 mod diffuse;
 pub mod fresnel;
 mod mask;
 pub mod microfacet;
+mod normalmap;
 mod null;
 mod plastic;
 mod principled;
@@ -29,10 +31,12 @@ mod thindielectric;
 mod twosided;
 
 pub use blendbsdf::{BlendBsdf, BlendBsdfContext};
+pub use bumpmap::BumpMap;
 pub use conductor::{Conductor, ConductorContext};
 pub use dielectric::{Dielectric, DielectricContext};
 pub use diffuse::{Diffuse, DiffuseContext};
 pub use mask::{Mask, MaskContext};
+pub use normalmap::{NormalMap, PerturbedFrameContext};
 pub use null::{Null, NullContext};
 pub use plastic::{Plastic, PlasticContext};
 pub use principled::{Ior, Principled, PrincipledContext};
@@ -182,6 +186,9 @@ pub enum NodeContext<'a, R: Real> {
     Null(NullContext<R>),
     BlendBsdf(BlendBsdfContext<R>),
     Mask(MaskContext<R>),
+    /// `normalmap` and `bumpmap`, which differ only in how they build the
+    /// frame.
+    PerturbedFrame(PerturbedFrameContext<R>),
 }
 
 /// The most nodes a [`BsdfContext`] holds. The contexts of nested BSDFs
@@ -283,6 +290,7 @@ macro_rules! dispatch_context {
             NodeContext::TwoSided(c) => c.$method($this, $($arg),*),
             NodeContext::BlendBsdf(c) => c.$method($this, $($arg),*),
             NodeContext::Mask(c) => c.$method($this, $($arg),*),
+            NodeContext::PerturbedFrame(c) => c.$method($this, $($arg),*),
         }
     };
 }
@@ -323,6 +331,8 @@ pub enum Bsdf {
     Null(Null),
     BlendBsdf(BlendBsdf),
     Mask(Mask),
+    NormalMap(NormalMap),
+    BumpMap(BumpMap),
 }
 
 /// The plugin names [`Bsdf::from_node`] knows.
@@ -341,6 +351,8 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "null",
     "blendbsdf",
     "mask",
+    "normalmap",
+    "bumpmap",
 ];
 
 macro_rules! dispatch {
@@ -360,6 +372,8 @@ macro_rules! dispatch {
             Bsdf::Null($b) => $e,
             Bsdf::BlendBsdf($b) => $e,
             Bsdf::Mask($b) => $e,
+            Bsdf::NormalMap($b) => $e,
+            Bsdf::BumpMap($b) => $e,
         }
     };
 }
@@ -406,6 +420,8 @@ impl Bsdf {
             "null" => Bsdf::Null(Null::from_node(node, ctx)?),
             "blendbsdf" => Bsdf::BlendBsdf(BlendBsdf::from_node(node, ctx)?),
             "mask" => Bsdf::Mask(Mask::from_node(node, ctx)?),
+            "normalmap" => Bsdf::NormalMap(NormalMap::from_node(node, ctx)?),
+            "bumpmap" => Bsdf::BumpMap(BumpMap::from_node(node, ctx)?),
             other => {
                 return Err(node.error(format!(
                     "unknown BSDF plugin '{other}' (Penumbra has: {})",
@@ -449,6 +465,8 @@ impl Bsdf {
             Bsdf::TwoSided(b) => b.parameters_changed(store),
             Bsdf::BlendBsdf(b) => b.parameters_changed(store),
             Bsdf::Mask(b) => b.parameters_changed(store),
+            Bsdf::NormalMap(b) => b.parameters_changed(store),
+            Bsdf::BumpMap(b) => b.parameters_changed(store),
             _ => {}
         }
     }
@@ -586,7 +604,7 @@ pub(crate) fn nested_bsdfs(node: &Node, names: &[&str]) -> Result<Vec<Node>> {
 
 /// A copy of `node` whose parameter keys start with `key` instead of its
 /// own prefix (nested objects without an id follow).
-fn rekey(node: &Node, key: &str) -> Node {
+pub(crate) fn rekey(node: &Node, key: &str) -> Node {
     let mut n = Node::new(
         node.class,
         &node.plugin,
@@ -786,6 +804,13 @@ mod tests {
                 vec![("bsdf", nested("b", "bsdf", "roughconductor", &[]))],
             ),
             ("mask", vec![("bsdf", nested("b", "bsdf", "plastic", &[]))]),
+            (
+                "normalmap",
+                vec![
+                    ("normalmap", rgb(0.6, 0.35, 0.9)),
+                    ("bsdf", nested("b", "bsdf", "roughconductor", &[])),
+                ],
+            ),
             (
                 "blendbsdf",
                 vec![

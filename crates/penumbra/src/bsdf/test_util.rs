@@ -80,6 +80,8 @@ pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
             n: V3::cst(Vec3::Z),
         },
         uv: V2::new(R::cst(0.5), R::cst(0.5)),
+        dp_du: V3::cst(glam::Vec3::X),
+        dp_dv: V3::cst(glam::Vec3::Y),
         wi: V3::cst(wi),
         area_scale: R::cst(1.0),
         shape: 0,
@@ -361,7 +363,7 @@ fn central_difference(f: impl Fn(f32) -> Option<Vec3>) -> Option<Vec3> {
 
 /// Asserts that the forward-mode derivative `d` matches the finite
 /// difference `fd` of a quantity of value `value` (see [`FD_REL`]).
-fn assert_derivative(d: Vec3, fd: Vec3, value: Vec3, what: &dyn Fn() -> String) {
+pub fn assert_derivative(d: Vec3, fd: Vec3, value: Vec3, what: &dyn Fn() -> String) {
     let tol = fd.abs() * FD_REL + value.abs() * FD_FLOOR;
     assert!(
         (d - fd).abs().cmple(tol).all(),

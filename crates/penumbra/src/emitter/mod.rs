@@ -72,6 +72,8 @@ pub(crate) fn surface_si<R: Real>(
         n: V3::cst(n),
         sh_frame: frame,
         uv: V2::cst(uv),
+        dp_du: V3::zero(),
+        dp_dv: V3::zero(),
         wi,
         area_scale: R::cst(1.0),
         shape,

@@ -90,6 +90,13 @@ pub struct SurfaceInteraction<R> {
     /// Shading frame (shading normal in `sh_frame.n`).
     pub sh_frame: Frame<R>,
     pub uv: V2<R>,
+    /// Surface tangents ∂p/∂u and ∂p/∂v with respect to `uv`, as the
+    /// shape parametrises its surface (not unit, not orthogonal). Where the
+    /// shape has no uv parametrisation (a mesh without texture
+    /// coordinates, or a degenerate uv triangle) they are the tangents of
+    /// the geometric normal's coordinate system, as in Mitsuba.
+    pub dp_du: V3<R>,
+    pub dp_dv: V3<R>,
     /// Direction towards the previous path vertex (the ray origin), in
     /// the shading frame.
     pub wi: V3<R>,

@@ -623,7 +623,12 @@ impl Mesh {
         let cross = e1.cross(e2);
         let area_scale = cross.length();
         let mut n = cross / area_scale;
-        let (uv, dpdu) = match self.texcoords {
+        // Mitsuba's mesh.cpp: the tangents of the normal's coordinate
+        // system unless the triangle's texture coordinates give ∂p/∂u and
+        // ∂p/∂v (solving [e1 e2] = [∂p/∂u ∂p/∂v] [Δuv1 Δuv2]).
+        let normal_frame = Frame::from_normal(n);
+        let fallback = (normal_frame.s, normal_frame.t);
+        let (uv, (dp_du, dp_dv)) = match self.texcoords {
             Some(tid) => {
                 let read2 = |i: usize| {
                     V2::new(store.read::<R>(tid, 2 * i), store.read::<R>(tid, 2 * i + 1))
@@ -634,15 +639,19 @@ impl Mesh {
                     t0.y * b0 + t1.y * b1 + t2.y * b2,
                 );
                 let (du1, du2) = (t1 - t0, t2 - t0);
-                let duv_det = du1.x * du2.y - du1.y * du2.x;
-                let dpdu = if duv_det.val().abs() > 1e-12 {
-                    (e1 * du2.y - e2 * du1.y) / duv_det
+                let det = du1.x * du2.y - du1.y * du2.x;
+                let tangents = if det.val() != 0.0 && det.is_finite() {
+                    let inv = det.recip();
+                    (
+                        (e1 * du2.y - e2 * du1.y) * inv,
+                        (e2 * du1.x - e1 * du2.x) * inv,
+                    )
                 } else {
-                    e1
+                    fallback
                 };
-                (uv, dpdu)
+                (uv, tangents)
             }
-            None => (V2::new(b1, b2), e1),
+            None => (V2::new(b1, b2), fallback),
         };
         let mut ns = match self.normals {
             Some(nid) => {
@@ -690,8 +699,10 @@ impl Mesh {
             t,
             p,
             n,
-            sh_frame: Frame::from_normal_tangent(ns, dpdu),
+            sh_frame: Frame::from_normal_tangent(ns, dp_du),
             uv,
+            dp_du,
+            dp_dv,
             wi: V3::zero(),
             area_scale,
             shape: hit.shape,

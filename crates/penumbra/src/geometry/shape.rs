@@ -358,6 +358,136 @@ mod tests {
         );
     }
 
+    /// ∂p/∂u and ∂p/∂v are the derivatives of the surface point in uv:
+    /// for hits a small step ε = 5e-4 away (two rays offset across the
+    /// surface), p − p₀ = ∂p/∂u Δu + ∂p/∂v Δv to first order. The
+    /// remainder is second order, ≲ ε / ρ relative to |p − p₀| where ρ is
+    /// the smallest radius of curvature of the surface or of its uv lines
+    /// (≥ 0.25 here: the cylinder's radius, the disk's hits off centre); the
+    /// rounding of the f32 points (~3e-7 at |p| ≤ 3) is ≲ 1e-3 relative:
+    /// 2e-2 bounds both. A mesh without uvs gets the
+    /// tangents of its normal's coordinate system (uv are barycentrics
+    /// there, so no difference applies), as in Mitsuba.
+    #[test]
+    fn tangents_are_the_position_derivatives_in_uv() {
+        let turn = Transform::rotate(Vec3::new(1.0, 2.0, 0.5), 35.0)
+            .after(&Transform::new(Mat4::from_scale(Vec3::new(1.5, 0.8, 1.0))).unwrap());
+        let shapes = [
+            node(
+                "sphere",
+                "s",
+                vec![
+                    ("center", Value::Point(Vec3::new(0.1, -0.2, 0.3))),
+                    ("radius", Value::Float(0.7)),
+                ],
+            ),
+            // off centre, where its polar uv lines curve little
+            node(
+                "disk",
+                "d",
+                vec![(
+                    "to_world",
+                    Value::Transform(Transform::translate(Vec3::new(-0.4, -0.3, 0.0)).after(&turn)),
+                )],
+            ),
+            node("rectangle", "r", vec![("to_world", Value::Transform(turn))]),
+            node("cube", "c", vec![("to_world", Value::Transform(turn))]),
+            node(
+                "cylinder",
+                "y",
+                vec![
+                    ("p0", Value::Point(Vec3::new(0.0, -1.0, 0.2))),
+                    ("p1", Value::Point(Vec3::new(0.3, 1.0, -0.1))),
+                    ("radius", Value::Float(0.3)),
+                ],
+            ),
+        ];
+        let eps = 5e-4;
+        for n in &shapes {
+            let mut ctx = LoadContext::default();
+            let s = Shape::from_node(n, &mut ctx).unwrap();
+            let store = &ctx.store;
+            let at = |o: Vec3, d: Vec3| {
+                let ray = Ray::new(o, d);
+                let h = hit_of(&s, store, &ray);
+                s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h)
+            };
+            let mut checked = 0;
+            for (o, target) in [
+                (Vec3::new(3.0, 1.0, 2.0), Vec3::new(0.05, 0.1, 0.1)),
+                (Vec3::new(-2.0, 2.5, 1.0), Vec3::new(0.1, 0.05, -0.05)),
+                (Vec3::new(0.5, -3.0, -2.0), Vec3::new(0.0, 0.1, 0.05)),
+            ] {
+                let d = (target - o).normalize();
+                let ray = Ray::new(o, d);
+                let a = crate::geometry::Accel::build(std::slice::from_ref(&s), store);
+                if a.intersect(&ray).is_none() {
+                    continue;
+                }
+                let si = at(o, d);
+                let (p0, uv0) = (si.p.val(), si.uv.val());
+                let (du, dv) = (si.dp_du.val(), si.dp_dv.val());
+                for offset in [
+                    d.any_orthonormal_vector(),
+                    d.cross(d.any_orthonormal_vector()),
+                ] {
+                    let sj = at(o + offset * eps, d);
+                    let (dp, duv) = (sj.p.val() - p0, sj.uv.val() - uv0);
+                    if sj.prim != si.prim || duv.abs().max_element() > 0.5 {
+                        continue; // another face, or across the uv seam
+                    }
+                    let err = dp - (du * duv.x + dv * duv.y);
+                    assert!(
+                        err.length() <= 2e-2 * dp.length(),
+                        "{}: p − p₀ = {dp}, ∂p/∂u {du} Δu {} + ∂p/∂v {dv} Δv {}",
+                        n.plugin,
+                        duv.x,
+                        duv.y
+                    );
+                    checked += 1;
+                }
+            }
+            assert!(
+                checked >= 2,
+                "{}: only {checked} differences checked",
+                n.plugin
+            );
+        }
+
+        let mut store = ParamStore::default();
+        let triangle = crate::geometry::mesh::MeshData {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.2, 0.0),
+                Vec3::new(0.3, 1.0, 0.4),
+            ],
+            normals: None,
+            texcoords: None,
+            faces: vec![[0, 1, 2]],
+            attributes: Vec::new(),
+        };
+        let opts = crate::geometry::mesh::MeshOptions {
+            face_normals: true,
+            flip_normals: false,
+        };
+        let m = Mesh::new(
+            "ply",
+            "m",
+            "t.ply",
+            triangle,
+            &Transform::IDENTITY,
+            opts,
+            &mut store,
+        )
+        .unwrap();
+        let s = Shape::Mesh(m);
+        let ray = Ray::new(Vec3::new(0.4, 0.4, 3.0), -Vec3::Z);
+        let h = hit_of(&s, &store, &ray);
+        let si = s.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &h);
+        let f = crate::math::Frame::from_normal(si.n);
+        assert_eq!((si.dp_du.val(), si.dp_dv.val()), (f.s.val(), f.t.val()));
+    }
+
     #[test]
     fn cube_normals_point_outward() {
         let mut ctx = LoadContext::default();

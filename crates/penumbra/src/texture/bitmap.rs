@@ -234,20 +234,65 @@ impl Bitmap {
                 self.texel(store, self.wrap.wrap(x, w), self.wrap.wrap(y, h))
             }
             FilterType::Bilinear => {
-                // texel centres at integer coordinates
-                let x = uv.x * w as f32 - 0.5;
-                let y = uv.y * h as f32 - 0.5;
-                let (x0, y0) = (x.val().floor(), y.val().floor());
-                let (fx, fy) = (x - x0, y - y0);
-                let (x0, y0) = (x0 as i64, y0 as i64);
-                let (xa, xb) = (self.wrap.wrap(x0, w), self.wrap.wrap(x0 + 1, w));
-                let (ya, yb) = (self.wrap.wrap(y0, h), self.wrap.wrap(y0 + 1, h));
+                let ([xa, xb, ya, yb], fx, fy) = self.bilinear_taps(uv);
                 let (gx, gy) = (R::cst(1.0) - fx, R::cst(1.0) - fy);
                 let top = self.texel(store, xa, ya) * gx + self.texel(store, xb, ya) * fx;
                 let bottom = self.texel(store, xa, yb) * gx + self.texel(store, xb, yb) * fx;
                 top * gy + bottom * fy
             }
         }
+    }
+
+    /// The texel columns and rows `[x0, x1, y0, y1]` (wrapped) between
+    /// whose centres `uv` lies, and its fractional position `(fx, fy)`
+    /// from the (x0, y0) centre: texel centres at integer coordinates.
+    fn bilinear_taps<R: Real>(&self, uv: V2<R>) -> ([usize; 4], R, R) {
+        let (w, h) = (self.width, self.height);
+        let x = uv.x * w as f32 - 0.5;
+        let y = uv.y * h as f32 - 0.5;
+        let (x0, y0) = (x.val().floor(), y.val().floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let taps = [
+            self.wrap.wrap(x0, w),
+            self.wrap.wrap(x0 + 1, w),
+            self.wrap.wrap(y0, h),
+            self.wrap.wrap(y0 + 1, h),
+        ];
+        (taps, fx, fy)
+    }
+
+    /// The gradient (∂/∂u, ∂/∂v) of [`eval_1`](TextureT::eval_1) at the
+    /// interaction's uv, as Mitsuba 3's bitmap `eval_1_grad` computes it
+    /// (for `bumpmap`): the derivative of the bilinear interpolation of
+    /// the texels' values (luminances for RGB data) in texel units,
+    /// carried through the transpose of `to_uv`'s linear part and scaled
+    /// by the resolution (the chain rule exactly when `to_uv` does not mix
+    /// u and v or the image is square). Zero for nearest filtering, whose
+    /// value is piecewise constant.
+    pub fn eval_1_grad<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> V2<R> {
+        if self.filter == FilterType::Nearest {
+            return V2::zero();
+        }
+        let uv = apply_to_uv(store, self.to_uv, si.uv);
+        let ([xa, xb, ya, yb], fx, fy) = self.bilinear_taps(uv);
+        let f = |x, y| {
+            let v = self.texel::<R>(store, x, y);
+            if self.channels == 3 {
+                v.luminance()
+            } else {
+                v.x
+            }
+        };
+        let (f00, f10, f01, f11) = (f(xa, ya), f(xb, ya), f(xa, yb), f(xb, yb));
+        let (gx, gy) = (R::cst(1.0) - fx, R::cst(1.0) - fy);
+        let df_dx = (f10 - f00) * gy + (f11 - f01) * fy;
+        let df_dy = (f01 - f00) * gx + (f11 - f10) * fx;
+        let m = |i| store.value(self.to_uv, i);
+        V2::new(
+            (df_dx * m(0) + df_dy * m(3)) * self.width as f32,
+            (df_dx * m(1) + df_dy * m(4)) * self.height as f32,
+        )
     }
 }
 

@@ -182,6 +182,8 @@ pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
         n,
         sh_frame: Frame::from_normal(n),
         uv: V2::cst(glam::Vec2::new(u, v)),
+        dp_du: V3::cst(glam::Vec3::X),
+        dp_dv: V3::cst(glam::Vec3::Y),
         wi: V3::cst(glam::Vec3::Z),
         area_scale: R::cst(1.0),
         shape: 0,

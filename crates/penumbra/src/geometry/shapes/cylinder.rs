@@ -315,7 +315,9 @@ impl Cylinder {
         if self.flip_normals {
             n = -n;
         }
-        analytic_interaction(hit, t, p, n, dpdphi * R::cst(2.0 * PI), uv, area_scale)
+        // v is the local height, which spans the axis a2
+        let dp_du = dpdphi * R::cst(2.0 * PI);
+        analytic_interaction(hit, t, p, n, [dp_du, a2], uv, area_scale)
     }
 }
 

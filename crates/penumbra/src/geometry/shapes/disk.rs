@@ -225,16 +225,20 @@ impl Disk {
         let rr = (x * x + y * y).safe_sqrt();
         let phi = azimuth(y, x);
         let uv = V2::new(rr, phi * (0.5 / PI));
-        let dpdu = if rr.val() > 0.0 {
-            (a0 * x + a1 * y) / rr
+        // p = a0 r cos 2πv + a1 r sin 2πv (plus the centre), with the
+        // local x direction at the centre, as Mitsuba's disk.cpp
+        let (cos_phi, sin_phi) = if rr.val() > 0.0 {
+            (x / rr, y / rr)
         } else {
-            a0
+            (R::cst(1.0), R::cst(0.0))
         };
+        let dp_du = a0 * cos_phi + a1 * sin_phi;
+        let dp_dv = (a1 * cos_phi - a0 * sin_phi) * (rr * (2.0 * PI));
         let mut n = nv.normalize() * R::cst(self.normal_sign());
         if self.flip_normals {
             n = -n;
         }
         let area_scale = nv.length();
-        analytic_interaction(hit, t, p, n, dpdu, uv, area_scale)
+        analytic_interaction(hit, t, p, n, [dp_du, dp_dv], uv, area_scale)
     }
 }

@@ -50,17 +50,17 @@ pub(crate) fn azimuth<R: Real>(y: R, x: R) -> R {
 }
 
 /// The local geometry of an analytic shape at distance `t`, point `p`,
-/// with unit normal `n` (as oriented after `flip_normals`), tangent `dpdu`,
-/// surface coordinates `uv` and area scale `area_scale` (see
-/// [`SurfaceInteraction::area_scale`]): the shading frame from `n` and
-/// `dpdu`; `wi` zero.
+/// with unit normal `n` (as oriented after `flip_normals`), tangents
+/// `[∂p/∂u, ∂p/∂v]`, surface coordinates `uv` and area scale `area_scale`
+/// (see [`SurfaceInteraction::area_scale`]): the shading frame from `n`
+/// and ∂p/∂u; `wi` zero.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn analytic_interaction<R: Real>(
     hit: &Hit,
     t: R,
     p: V3<R>,
     n: V3<R>,
-    dpdu: V3<R>,
+    [dp_du, dp_dv]: [V3<R>; 2],
     uv: V2<R>,
     area_scale: R,
 ) -> SurfaceInteraction<R> {
@@ -68,8 +68,10 @@ pub(crate) fn analytic_interaction<R: Real>(
         t,
         p,
         n,
-        sh_frame: Frame::from_normal_tangent(n, dpdu),
+        sh_frame: Frame::from_normal_tangent(n, dp_du),
         uv,
+        dp_du,
+        dp_dv,
         wi: V3::zero(),
         area_scale,
         shape: hit.shape,

@@ -371,11 +371,19 @@ impl Sphere {
         let theta = lz.clamp(-1.0, 1.0).acos();
         let phi = azimuth(ly, lx);
         let uv = V2::new(phi * (0.5 / PI), theta * (1.0 / PI));
-        // dp/du = 2π r (-ly, lx, 0) in the local frame
-        let dpdu = (cy * lx - cx * ly) * (r * (2.0 * PI));
+        // In the local frame (Mitsuba's sphere.cpp): ∂p/∂u = 2π r (−ly, lx,
+        // 0) and ∂p/∂v = π r (lz cos φ, lz sin φ, −sin θ), the latter the
+        // local x axis at the poles, where φ is undefined.
+        let dp_du = (cy * lx - cx * ly) * (r * (2.0 * PI));
+        let rd = (lx * lx + ly * ly).safe_sqrt();
+        let dp_dv = if rd.val() > 0.0 {
+            (cx * (lx * lz / rd) + cy * (ly * lz / rd) - cz * rd) * (r * PI)
+        } else {
+            cx * (r * PI)
+        };
         if self.flip_normals {
             n = -n;
         }
-        analytic_interaction(hit, t, p, n, dpdu, uv, r * r)
+        analytic_interaction(hit, t, p, n, [dp_du, dp_dv], uv, r * r)
     }
 }
