@@ -330,6 +330,32 @@ pub(crate) fn scatter<R: Real>(
     }
 }
 
+/// Russian roulette on the throughput (times η² so that refraction does
+/// not end paths early), from depth `rr_depth` on: false if the path ends
+/// (also when nothing is left to carry); otherwise the throughput of a
+/// surviving path is divided by its survival probability.
+pub(crate) fn survives_roulette<R: Real>(
+    throughput: &mut Spectrum<R>,
+    eta: f32,
+    depth: u32,
+    rr_depth: u32,
+    rng: &mut SampleStream,
+) -> bool {
+    let u = rng.next_1d();
+    let t_max = throughput.val().max_element() * eta * eta;
+    if !(t_max > 0.0) {
+        return false;
+    }
+    if depth >= rr_depth {
+        let q = t_max.min(0.95);
+        if u >= q {
+            return false;
+        }
+        *throughput *= R::cst(1.0 / q);
+    }
+    true
+}
+
 /// Balance of two sampling strategies by the power heuristic (β = 2).
 #[inline(always)]
 pub(crate) fn mis_weight(pdf_a: f32, pdf_b: f32) -> f32 {

@@ -4,7 +4,7 @@
 //! tracers `prb`, `prb_basic` and `prb_projective`: here one estimator
 //! serves the primal and both derivative modes).
 
-use super::{mis_weight, scatter, Budgets};
+use super::{mis_weight, scatter, survives_roulette, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
@@ -174,19 +174,8 @@ impl PathIntegrator {
             prev_pdf = bs.pdf;
             prev_delta = bounce.delta;
 
-            // Russian roulette on the throughput (times η² so that
-            // refraction does not end paths early)
-            let u_rr = rng.next_1d();
-            let t_max = throughput.val().max_element() * eta * eta;
-            if !(t_max > 0.0) {
+            if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
                 return result;
-            }
-            if depth >= self.rr_depth {
-                let q = t_max.min(0.95);
-                if u_rr >= q {
-                    return result;
-                }
-                throughput *= R::cst(1.0 / q);
             }
             depth += 1;
         }

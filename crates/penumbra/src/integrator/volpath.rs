@@ -24,7 +24,7 @@
 //! are not supported: the derivative calls refuse them for this
 //! integrator.
 
-use super::{mis_weight, Budgets};
+use super::{mis_weight, survives_roulette, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::{EmitterSample, EmitterT};
@@ -150,7 +150,7 @@ impl VolPathIntegrator {
                         };
                         ray = Ray::new(p, wo);
                         hit = scene.intersect(&ray);
-                        if !self.survives_roulette(&mut throughput, eta, depth, rng) {
+                        if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
                             return result;
                         }
                         continue;
@@ -245,34 +245,10 @@ impl VolPathIntegrator {
             }
             ray = si.spawn_ray(d);
             hit = scene.intersect(&ray);
-            if !self.survives_roulette(&mut throughput, eta, depth, rng) {
+            if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
                 return result;
             }
         }
-    }
-
-    /// Russian roulette on the throughput (times η² so that refraction does
-    /// not end paths early), from `rr_depth` on; false if the path ends.
-    fn survives_roulette<R: Real>(
-        &self,
-        throughput: &mut Spectrum<R>,
-        eta: f32,
-        depth: u32,
-        rng: &mut SampleStream,
-    ) -> bool {
-        let u = rng.next_1d();
-        let t_max = throughput.val().max_element() * eta * eta;
-        if !(t_max > 0.0) {
-            return false;
-        }
-        if depth >= self.rr_depth {
-            let q = t_max.min(0.95);
-            if u >= q {
-                return false;
-            }
-            *throughput *= R::cst(1.0 / q);
-        }
-        true
     }
 
     /// Next-event estimation from a vertex where the path travels in
