@@ -29,9 +29,15 @@ fn opts(spp: u32, seed: u64) -> RenderOptions {
     }
 }
 
-/// The scene at 32² with the parameter `key` set to `value` (if given).
+/// The scene at 32² (the volume scenes; the conformance scenes are small
+/// already) with the parameter `key` set to `value` (if given).
 fn scene(name: &str, key: &str, value: Option<&[f32]>) -> Scene {
-    let mut s = volume_scenes::load(name, &[("res", "32")]);
+    let defines: &[(&str, &str)] = if name.starts_with("conformance/") {
+        &[]
+    } else {
+        &[("res", "32")]
+    };
+    let mut s = volume_scenes::load(name, defines);
     if let Some(v) = value {
         s.params.set(key, v).unwrap();
         s.update().unwrap();
@@ -132,6 +138,14 @@ fn heterogeneous_medium_parameters_match_finite_differences() {
     ] {
         check_against_finite_differences("volume_hetero", key, None, tangent, 0.05, 32);
     }
+}
+
+/// The anisotropy of a Henyey-Greenstein phase function (the smoke of the
+/// conformance scene with media inside, outside and around the camera).
+#[test]
+fn phase_function_anisotropy_matches_finite_differences() {
+    let name = "conformance/medium_interior_exterior";
+    check_against_finite_differences(name, "smoke.phase_function.g", None, vec![1.0], 0.05, 128);
 }
 
 /// Reverse mode gives ⟨δI, dI/dθ · t⟩ for an adjoint image δI; with the

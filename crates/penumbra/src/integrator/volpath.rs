@@ -38,8 +38,9 @@ use crate::scene::{Node, Scene};
 use crate::sensor::CameraSample;
 use glam::Vec3;
 
-/// Shadow rays stop this fraction short of the emitter point (so as not
-/// to hit the emitter's own surface).
+/// Shadow rays from points in media stop this fraction short of the
+/// emitter point (so as not to hit the emitter's own surface), as those
+/// from surfaces do (`SurfaceInteraction::spawn_ray_to`).
 const SHADOW_EPSILON: f32 = 1e-4;
 
 /// Volumetric path tracer settings.
@@ -60,8 +61,9 @@ struct LastScatter {
     p: Vec3,
     /// Directional density of the sampled direction (phase or BSDF).
     pdf: f32,
-    /// The direction came from a delta lobe (or the camera): emitters
-    /// reached count with their whole weight.
+    /// The direction came from a delta lobe, the camera, or a vertex
+    /// without next-event estimation: emitters reached count with their
+    /// whole weight.
     delta: bool,
 }
 
@@ -143,10 +145,12 @@ impl VolPathIntegrator {
                         // value 1: the phase function is sampled exactly
                         let f = m.phase_eval::<R>(store, wi, V3::cst(wo));
                         throughput *= f * (1.0 / pdf);
+                        // without next-event estimation here, an emitter the
+                        // phase sample reaches counts with its whole weight
                         last = LastScatter {
                             p,
                             pdf,
-                            delta: false,
+                            delta: !m.sample_emitters,
                         };
                         ray = Ray::new(p, wo);
                         hit = scene.intersect(&ray);
@@ -264,27 +268,33 @@ impl VolPathIntegrator {
         u: glam::Vec2,
         rng: &mut SampleStream,
     ) -> Option<(EmitterSample<R>, Spectrum<R>)> {
+        // The shadow ray aims at the emitter point from its own origin (off
+        // the surface), and stops short of it: aimed along the sampled
+        // direction from an offset origin instead, it can meet a curved
+        // emitter (a sphere near its outline) just before the point.
         let (mut ray, mut medium, es) = match from {
             Vertex::Surface(h, si) => {
                 let es = scene.sample_emitter::<R>(store, si.p, u)?;
-                let d = es.ds.d;
+                let ray = if es.ds.dist.is_finite() {
+                    si.spawn_ray_to(es.ds.p)
+                } else {
+                    si.spawn_ray(es.ds.d)
+                };
                 // leave the surface on the emitter's side, into the medium
                 // there
-                let ray = si.spawn_ray(d);
-                (ray, next_medium(scene, h, si.n.val(), d, medium), es)
+                let medium = next_medium(scene, h, si.n.val(), ray.d, medium);
+                (ray, medium, es)
             }
             Vertex::Medium(p) => {
                 let es = scene.sample_emitter::<R>(store, V3::cst(p), u)?;
-                (Ray::new(p, es.ds.d), medium, es)
+                let mut ray = Ray::new(p, es.ds.d);
+                ray.tmax = es.ds.dist * (1.0 - SHADOW_EPSILON);
+                (ray, medium, es)
             }
         };
-        let d = es.ds.d;
+        let d = ray.d;
         // how far the shadow ray still has to go
-        let mut remaining = if es.ds.dist.is_finite() {
-            (es.ds.p - ray.o).length() * (1.0 - SHADOW_EPSILON)
-        } else {
-            f32::INFINITY
-        };
+        let mut remaining = ray.tmax;
         let mut tr = Spectrum::<R>::splat(R::cst(1.0));
         loop {
             ray.tmax = remaining;
