@@ -158,7 +158,7 @@ def test_forward_bad_input(scene, tangents, exc, msg):
          pn.ParamError, "not differentiable"),
         (np.ones((20, 20, 3), np.float32), {"integrator": {"type": "aov", "aovs": "d:depth"}},
          ValueError, "no derivatives"),
-        (np.ones((20, 20, 3), np.float32), {"integrator": {"type": "volpath"}},
+        (np.ones((20, 20, 3), np.float32), {"integrator": {"type": "ptracer"}},
          pn.SceneError, "type"),
     ],
 )
