@@ -41,6 +41,10 @@ impl Real for Dual {
     fn tracks(store: &ParamView, id: ParamId) -> bool {
         store.has_tangent(id)
     }
+    #[inline(always)]
+    fn is_const(self) -> bool {
+        self.d == 0.0
+    }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();
         self.chain(s, if s > 0.0 { 0.5 / s } else { 0.0 })

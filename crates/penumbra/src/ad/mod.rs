@@ -64,6 +64,11 @@ pub trait Real:
     fn tracks(_store: &ParamView, _id: ParamId) -> bool {
         false
     }
+    /// Whether this value carries no derivative (always for `f32`): a
+    /// computation from constants only can then run on f32 and be lifted.
+    fn is_const(self) -> bool {
+        true
+    }
 
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;

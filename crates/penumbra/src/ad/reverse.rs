@@ -24,7 +24,6 @@ struct TapeNode {
     partials: [f32; 2],
 }
 
-#[derive(Default)]
 struct Tape {
     nodes: Vec<TapeNode>,
     /// Leaves read from the parameter store: (parameter, element, node).
@@ -34,7 +33,14 @@ struct Tape {
 }
 
 thread_local! {
-    static TAPE: RefCell<Tape> = RefCell::new(Tape::default());
+    // const-initialised: no lazy-initialisation check per operation
+    static TAPE: RefCell<Tape> = const {
+        RefCell::new(Tape {
+            nodes: Vec::new(),
+            leaves: Vec::new(),
+            adjoints: Vec::new(),
+        })
+    };
 }
 
 /// A real number that records how it was computed, for reverse mode.
@@ -50,6 +56,10 @@ impl Default for Var {
     }
 }
 
+/// Records one operation on the tape; kept out of line so that operations
+/// on constants (most of a path: geometry, sampling) inline to plain f32
+/// arithmetic and a test.
+#[inline(never)]
 fn push(args: [u32; 2], partials: [f32; 2]) -> u32 {
     TAPE.with(|t| {
         let mut t = t.borrow_mut();
@@ -61,7 +71,7 @@ fn push(args: [u32; 2], partials: [f32; 2]) -> u32 {
 
 impl Var {
     /// Result of a unary operation with derivative `d`.
-    #[inline]
+    #[inline(always)]
     fn unary(self, v: f32, d: f32) -> Var {
         if self.node == CONST {
             return Var { v, node: CONST };
@@ -73,7 +83,7 @@ impl Var {
     }
 
     /// Result of a binary operation with partials `da`, `db`.
-    #[inline]
+    #[inline(always)]
     fn binary(a: Var, b: Var, v: f32, da: f32, db: f32) -> Var {
         match (a.node == CONST, b.node == CONST) {
             (true, true) => Var { v, node: CONST },
@@ -151,16 +161,20 @@ pub fn backward(outputs: &[(Var, f32)], mut scatter: impl FnMut(ParamId, usize, 
 }
 
 impl Real for Var {
-    #[inline]
+    #[inline(always)]
     fn cst(v: f32) -> Self {
         Var { v, node: CONST }
     }
-    #[inline]
+    #[inline(always)]
     fn val(self) -> f32 {
         self.v
     }
     fn tracks(store: &ParamView, id: ParamId) -> bool {
         store.is_recorded(id)
+    }
+    #[inline(always)]
+    fn is_const(self) -> bool {
+        self.node == CONST
     }
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         let v = store.value(id, index);
@@ -237,87 +251,97 @@ impl Real for Var {
 
 impl Add for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn add(self, o: Var) -> Var {
         Var::binary(self, o, self.v + o.v, 1.0, 1.0)
     }
 }
 impl Sub for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn sub(self, o: Var) -> Var {
         Var::binary(self, o, self.v - o.v, 1.0, -1.0)
     }
 }
 impl Mul for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn mul(self, o: Var) -> Var {
         Var::binary(self, o, self.v * o.v, o.v, self.v)
     }
 }
 impl Div for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn div(self, o: Var) -> Var {
         // primal by a true division, so that f32, Dual and Var primals
         // agree (the boundary term selects and samples edges from them)
         let v = self.v / o.v;
+        if self.node == CONST && o.node == CONST {
+            return Var { v, node: CONST };
+        }
         let inv = 1.0 / o.v;
         Var::binary(self, o, v, inv, -v * inv)
     }
 }
 impl Neg for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn neg(self) -> Var {
         self.unary(-self.v, -1.0)
     }
 }
 impl Add<f32> for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn add(self, o: f32) -> Var {
         self.unary(self.v + o, 1.0)
     }
 }
 impl Sub<f32> for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn sub(self, o: f32) -> Var {
         self.unary(self.v - o, 1.0)
     }
 }
 impl Mul<f32> for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn mul(self, o: f32) -> Var {
         self.unary(self.v * o, o)
     }
 }
 impl Div<f32> for Var {
     type Output = Var;
-    #[inline]
+    #[inline(always)]
     fn div(self, o: f32) -> Var {
+        if self.node == CONST {
+            return Var::cst(self.v / o);
+        }
         self.unary(self.v / o, 1.0 / o)
     }
 }
 impl AddAssign for Var {
+    #[inline(always)]
     fn add_assign(&mut self, o: Var) {
         *self = *self + o;
     }
 }
 impl SubAssign for Var {
+    #[inline(always)]
     fn sub_assign(&mut self, o: Var) {
         *self = *self - o;
     }
 }
 impl MulAssign for Var {
+    #[inline(always)]
     fn mul_assign(&mut self, o: Var) {
         *self = *self * o;
     }
 }
 impl DivAssign for Var {
+    #[inline(always)]
     fn div_assign(&mut self, o: Var) {
         *self = *self / o;
     }

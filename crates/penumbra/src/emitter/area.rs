@@ -41,6 +41,7 @@ impl Area {
     /// weight carries the derivative of the Jacobian from the emitter's
     /// area to solid angle at `ref_p`, `area_scale · |cos θ_e| / dist²`
     /// (Zhang et al. 2020, "Path-Space Differentiable Rendering", §4).
+    #[inline(always)]
     pub fn sample_from_position<R: Real>(
         &self,
         store: &ParamView,

@@ -56,6 +56,7 @@ pub(crate) fn far_point(bs: &BoundingSphere, ref_p: Vec3, d: Vec3) -> Vec3 {
 /// A surface interaction at an emitter point (for texture lookups by uv):
 /// position `p`, unit normal `n`, `wi_world` the unit direction leaving
 /// the surface.
+#[inline(always)]
 pub(crate) fn surface_si<R: Real>(
     p: Vec3,
     n: Vec3,

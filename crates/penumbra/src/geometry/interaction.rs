@@ -54,6 +54,12 @@ impl<R: Real> DiffRay<R> {
             tmax: ray.tmax,
         }
     }
+    /// Whether neither origin nor direction carries a derivative.
+    #[inline(always)]
+    pub fn is_const(&self) -> bool {
+        let c = |v: &V3<R>| v.x.is_const() && v.y.is_const() && v.z.is_const();
+        c(&self.o) && c(&self.d)
+    }
     /// The primal ray.
     #[inline(always)]
     pub fn val(&self) -> Ray {
@@ -113,6 +119,33 @@ pub struct SurfaceInteraction<R> {
 }
 
 impl<R: Real> SurfaceInteraction<R> {
+    /// An interaction whose every quantity is a constant (the f32
+    /// re-evaluation of a surface that does not move).
+    #[inline(always)]
+    pub fn cst(si: &SurfaceInteraction<f32>) -> Self {
+        let v3 = |v: V3<f32>| V3::cst(v.val());
+        let v2 = |v: V2<f32>| V2::new(R::cst(v.x), R::cst(v.y));
+        SurfaceInteraction {
+            t: R::cst(si.t),
+            p: v3(si.p),
+            n: v3(si.n),
+            sh_frame: Frame {
+                s: v3(si.sh_frame.s),
+                t: v3(si.sh_frame.t),
+                n: v3(si.sh_frame.n),
+            },
+            uv: v2(si.uv),
+            dp_du: v3(si.dp_du),
+            dp_dv: v3(si.dp_dv),
+            wi: v3(si.wi),
+            area_scale: R::cst(si.area_scale),
+            shape: si.shape,
+            prim: si.prim,
+            vertices: si.vertices,
+            bary: v2(si.bary),
+        }
+    }
+
     /// Sets `wi` to the world direction `d` (unit, pointing away from the
     /// surface towards the previous vertex).
     #[inline(always)]

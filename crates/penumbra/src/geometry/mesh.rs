@@ -558,19 +558,30 @@ impl Mesh {
     ) -> SurfaceInteraction<R> {
         let (idx, [p0, p1, p2]) = self.triangle_r::<R>(store, hit.prim);
         let (o, d) = (ray.o, ray.d);
-        let e1 = p1 - p0;
-        let e2 = p2 - p0;
-        let pvec = d.cross(e2);
-        let det = e1.dot(pvec);
-        let (t, b1, b2) = if det.val() != 0.0 && det.is_finite() {
-            let inv = det.recip();
-            let tvec = o - p0;
-            let qvec = tvec.cross(e1);
-            (e2.dot(qvec) * inv, tvec.dot(pvec) * inv, d.dot(qvec) * inv)
+        let (t, b1, b2, p) = if !R::DIFFERENTIABLE {
+            // The traversal's own solve gives the barycentrics; the point
+            // is interpolated from them (as Mitsuba does), so it lies on
+            // the triangle whatever origin offset the traced ray had.
+            let (b1, b2) = (R::cst(hit.uv.x), R::cst(hit.uv.y));
+            let p = p0 * (R::cst(1.0) - b1 - b2) + p1 * b1 + p2 * b2;
+            ((p - o).dot(d), b1, b2, p)
         } else {
-            (R::cst(hit.t), R::cst(hit.uv.x), R::cst(hit.uv.y))
+            // solved again in R for the derivatives of t and the
+            // barycentrics: the point slides along the ray
+            let e1 = p1 - p0;
+            let e2 = p2 - p0;
+            let pvec = d.cross(e2);
+            let det = e1.dot(pvec);
+            let (t, b1, b2) = if det.val() != 0.0 && det.is_finite() {
+                let inv = det.recip();
+                let tvec = o - p0;
+                let qvec = tvec.cross(e1);
+                (e2.dot(qvec) * inv, tvec.dot(pvec) * inv, d.dot(qvec) * inv)
+            } else {
+                (R::cst(hit.t), R::cst(hit.uv.x), R::cst(hit.uv.y))
+            };
+            (t, b1, b2, o + d * t)
         };
-        let p = o + d * t;
         let mut si = self.local_geometry(store, hit, idx, [p0, p1, p2], b1, b2, p, t);
         si.wi = si.to_local(-d);
         si
@@ -620,14 +631,24 @@ impl Mesh {
         let b0 = R::cst(1.0) - b1 - b2;
         let e1 = ps[1] - ps[0];
         let e2 = ps[2] - ps[0];
-        let cross = e1.cross(e2);
-        let area_scale = cross.length();
-        let mut n = cross / area_scale;
+        let (mut n, area_scale) = if R::DIFFERENTIABLE {
+            let cross = e1.cross(e2);
+            let area_scale = cross.length();
+            (cross / area_scale, area_scale)
+        } else {
+            // the unit normal kept per face (flipped with `flip_normals`,
+            // undone here as below it is flipped with the shading normal);
+            // nothing moves in f32, so the area scale is never used
+            let n = self.face_n[hit.prim as usize];
+            (V3::cst(if self.flip_normals { -n } else { n }), R::cst(1.0))
+        };
         // Mitsuba's mesh.cpp: the tangents of the normal's coordinate
         // system unless the triangle's texture coordinates give ∂p/∂u and
         // ∂p/∂v (solving [e1 e2] = [∂p/∂u ∂p/∂v] [Δuv1 Δuv2]).
-        let normal_frame = Frame::from_normal(n);
-        let fallback = (normal_frame.s, normal_frame.t);
+        let fallback = || {
+            let f = Frame::from_normal(n);
+            (f.s, f.t)
+        };
         let (uv, (dp_du, dp_dv)) = match self.texcoords {
             Some(tid) => {
                 let read2 = |i: usize| {
@@ -647,11 +668,11 @@ impl Mesh {
                         (e2 * du1.x - e1 * du2.x) * inv,
                     )
                 } else {
-                    fallback
+                    fallback()
                 };
                 (uv, tangents)
             }
-            None => (V2::new(b1, b2), fallback),
+            None => (V2::new(b1, b2), fallback()),
         };
         let mut ns = match self.normals {
             Some(nid) => {
@@ -1174,9 +1195,14 @@ mod tests {
             prim: 3,
             uv: Vec2::ZERO,
         };
-        let si0 = m.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &hit);
-        let b = (si0.uv, si0.t);
-        assert!(b.1 > 0.0);
+        // the hit is re-solved from the vertices in R (a Dual without
+        // tangents for the primal values: the f32 re-evaluation takes the
+        // traversal's barycentrics, which this hand-made hit lacks)
+        let primal = |store: &ParamStore| {
+            let si = m.surface_interaction::<Dual>(&store.primal(), &DiffRay::cst(&ray), &hit);
+            (si.t.v, si.p.val(), si.uv.x.v, si.n.val())
+        };
+        assert!(primal(&store).0 > 0.0);
         let base: Vec<f32> = store.data(m.positions).to_vec();
         let eps = 1e-3;
         for k in [3usize, 4, 5, 6, 7, 8, 9, 10, 11] {
@@ -1188,29 +1214,29 @@ mod tests {
                 let mut p = base.clone();
                 p[k] += delta;
                 store.set("m.vertex_positions", &p).unwrap();
-                m.surface_interaction::<f32>(&store.primal(), &DiffRay::cst(&ray), &hit)
+                primal(store)
             };
             let sp = eval(&mut store, eps);
             let sm = eval(&mut store, -eps);
             store.set("m.vertex_positions", &base).unwrap();
-            let fd_t = (sp.t - sm.t) / (2.0 * eps);
+            let fd_t = (sp.0 - sm.0) / (2.0 * eps);
             assert!(
                 (sd.t.d - fd_t).abs() < 2e-3 * (1.0 + fd_t.abs()),
                 "k={k}: {} vs {fd_t}",
                 sd.t.d
             );
-            let fd_p = (sp.p.val() - sm.p.val()) / (2.0 * eps);
+            let fd_p = (sp.1 - sm.1) / (2.0 * eps);
             let dp = Vec3::new(sd.p.x.d, sd.p.y.d, sd.p.z.d);
             assert!(
                 (dp - fd_p).length() < 2e-3 * (1.0 + fd_p.length()),
                 "k={k}: {dp} vs {fd_p}"
             );
-            let fd_u = (sp.uv.x - sm.uv.x) / (2.0 * eps);
+            let fd_u = (sp.2 - sm.2) / (2.0 * eps);
             assert!(
                 (sd.uv.x.d - fd_u).abs() < 2e-3 * (1.0 + fd_u.abs()),
                 "k={k}"
             );
-            let fd_n = (sp.n.val() - sm.n.val()) / (2.0 * eps);
+            let fd_n = (sp.3 - sm.3) / (2.0 * eps);
             let dn = Vec3::new(sd.n.x.d, sd.n.y.d, sd.n.z.d);
             assert!(
                 (dn - fd_n).length() < 5e-3 * (1.0 + fd_n.length()),
@@ -1245,11 +1271,13 @@ mod tests {
         .unwrap();
         let (_, s2) = build(tet()).unwrap();
         let ray = Ray::new(Vec3::new(0.2, 0.3, 5.0), -Vec3::Z);
+        // as the traversal reports it: face 0 = (0, 2, 1), barycentrics
+        // (b1, b2) of vertices 2 and 1 at (0.2, 0.3)
         let hit = Hit {
             t: 5.0,
             shape: 0,
             prim: 0,
-            uv: Vec2::ZERO,
+            uv: Vec2::new(0.3, 0.2),
         };
         let si = m.surface_interaction::<f32>(&s2.primal(), &DiffRay::cst(&ray), &hit);
         assert!((si.t - 5.0).abs() < 1e-5);

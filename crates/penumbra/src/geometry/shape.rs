@@ -165,6 +165,24 @@ impl Shape {
         }
     }
 
+    /// Whether any parameter that a re-evaluated hit of this shape reads
+    /// carries derivatives in `R` (those that move it, and a mesh's vertex
+    /// normals and texture coordinates): if none does, the hit can be
+    /// re-evaluated in f32 and lifted as constants.
+    pub fn reads_tracked<R: Real>(&self, store: &ParamView) -> bool {
+        if !R::DIFFERENTIABLE {
+            return false;
+        }
+        self.moves::<R>(store)
+            || match self {
+                Shape::Mesh(m) => {
+                    m.normals.is_some_and(|id| R::tracks(store, id))
+                        || m.texcoords.is_some_and(|id| R::tracks(store, id))
+                }
+                Shape::Sphere(_) | Shape::Disk(_) | Shape::Cylinder(_) => false,
+            }
+    }
+
     /// Refreshes derived data after the parameters `changed` were updated
     /// (areas, sampling tables, recomputed vertex normals). Call
     /// [`crate::geometry::Accel::update`] afterwards if any geometry

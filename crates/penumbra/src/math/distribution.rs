@@ -8,6 +8,10 @@ use glam::Vec2;
 pub struct DiscreteDistribution {
     /// Normalised cumulative sums: `cdf[i] = P(index < i)`, `cdf[n] = 1`.
     cdf: Vec<f64>,
+    /// `pmf[i] = cdf[i+1] − cdf[i]` as f32, and its reciprocal in f64 (0
+    /// for entries of no mass): sampling reads them instead of dividing.
+    pmf: Vec<f32>,
+    inv_pmf: Vec<f64>,
     /// Sum of the weights before normalisation.
     sum: f64,
 }
@@ -32,11 +36,21 @@ impl DiscreteDistribution {
         for c in cdf.iter_mut() {
             *c /= acc;
         }
-        Some(DiscreteDistribution { cdf, sum: acc })
+        let pmf: Vec<f32> = cdf.windows(2).map(|c| (c[1] - c[0]) as f32).collect();
+        let inv_pmf = pmf
+            .iter()
+            .map(|&p| if p > 0.0 { 1.0 / p as f64 } else { 0.0 })
+            .collect();
+        Some(DiscreteDistribution {
+            cdf,
+            pmf,
+            inv_pmf,
+            sum: acc,
+        })
     }
 
     pub fn len(&self) -> usize {
-        self.cdf.len().saturating_sub(1)
+        self.pmf.len()
     }
     pub fn is_empty(&self) -> bool {
         self.len() == 0
@@ -48,27 +62,30 @@ impl DiscreteDistribution {
     /// Probability of entry `i`.
     #[inline]
     pub fn pmf(&self, i: usize) -> f32 {
-        (self.cdf[i + 1] - self.cdf[i]) as f32
+        self.pmf[i]
     }
     /// Samples an index; returns it, its probability and `u` rescaled to
     /// [0,1) within the chosen entry (so it can be reused).
     #[inline]
     pub fn sample_reuse(&self, u: f32) -> (usize, f32, f32) {
+        let n = self.len();
+        if n == 1 {
+            // a single entry (one emitter, a one-triangle mesh): all mass
+            return (0, 1.0, u.clamp(0.0, 1.0 - f32::EPSILON));
+        }
         let u64 = u as f64;
         // first index i with cdf[i+1] > u, among entries of non-zero mass
-        let n = self.len();
         let mut i = self.cdf.partition_point(|&c| c <= u64).saturating_sub(1);
         i = i.min(n - 1);
         while i + 1 < n && self.cdf[i + 1] <= u64 {
             i += 1;
         }
         // skip zero-mass entries backwards (u rounded onto their boundary)
-        while self.pmf(i) == 0.0 && i > 0 {
+        while self.pmf[i] == 0.0 && i > 0 {
             i -= 1;
         }
-        let p = self.pmf(i);
-        let r = ((u64 - self.cdf[i]) / (p as f64)).clamp(0.0, 1.0 - f64::EPSILON) as f32;
-        (i, p, r.min(1.0 - f32::EPSILON))
+        let r = ((u64 - self.cdf[i]) * self.inv_pmf[i]).clamp(0.0, 1.0 - f64::EPSILON) as f32;
+        (i, self.pmf[i], r.min(1.0 - f32::EPSILON))
     }
 }
 

@@ -171,7 +171,13 @@ impl Scene {
         ray: &DiffRay<R>,
         hit: &Hit,
     ) -> SurfaceInteraction<R> {
-        self.shapes[hit.shape as usize].surface_interaction(store, ray, hit)
+        let shape = &self.shapes[hit.shape as usize];
+        if R::DIFFERENTIABLE && ray.is_const() && !shape.reads_tracked::<R>(store) {
+            // nothing the hit depends on carries a derivative
+            let ray = DiffRay::<f32>::cst(&ray.val());
+            return SurfaceInteraction::cst(&shape.surface_interaction(store, &ray, hit));
+        }
+        shape.surface_interaction(store, ray, hit)
     }
 
     /// Re-evaluates a hit in `R` as a point that moves with its shape (see
@@ -183,7 +189,11 @@ impl Scene {
         hit: &Hit,
         p: Vec3,
     ) -> SurfaceInteraction<R> {
-        self.shapes[hit.shape as usize].point_at(store, hit, p)
+        let shape = &self.shapes[hit.shape as usize];
+        if R::DIFFERENTIABLE && !shape.reads_tracked::<R>(store) {
+            return SurfaceInteraction::cst(&shape.point_at(store, hit, p));
+        }
+        shape.point_at(store, hit, p)
     }
 
     #[inline]
@@ -280,7 +290,7 @@ impl Scene {
         for m in &mut self.media {
             m.parameters_changed(&self.params);
         }
-        for s in &self.sensors {
+        for s in &mut self.sensors {
             s.parameters_changed(&self.params)?;
         }
         Ok(())

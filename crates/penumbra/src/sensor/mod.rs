@@ -78,6 +78,19 @@ pub struct Sensor {
     /// set by the scene builder.
     pub medium: Option<u32>,
     pose: Pose,
+    /// The parameters' current values as primal rays use them, refreshed
+    /// by [`Sensor::parameters_changed`]: an f32 camera ray reads no
+    /// parameter and evaluates no tangent.
+    primal: PrimalLens,
+}
+
+/// The primal pose and pinhole lens of a sensor: `to_world` (row-major)
+/// and `(tan(x_fov / 2), principal point offset)` (zero for cameras
+/// without a field of view).
+#[derive(Clone, Copy, Debug)]
+struct PrimalLens {
+    to_world: [f32; 16],
+    lens: (f32, [f32; 2]),
 }
 
 /// Where a sensor's `to_world` comes from.
@@ -182,13 +195,17 @@ impl Sensor {
             }
         };
         node.check_all_used()?;
-        let sensor = Sensor {
+        let mut sensor = Sensor {
             key: node.key.clone(),
             camera,
             film,
             sampler,
             medium: None,
             pose,
+            primal: PrimalLens {
+                to_world: [0.0; 16],
+                lens: (0.0, [0.0; 2]),
+            },
         };
         sensor
             .parameters_changed(store)
@@ -198,8 +215,9 @@ impl Sensor {
 
     /// Checks the sensor's parameters after an update: `to_world` must be
     /// invertible (a camera is placed, not collapsed), the field of view in
-    /// (0°, 180°). Rays read the parameters directly, so nothing is cached.
-    pub fn parameters_changed(&self, store: &ParamStore) -> Result<()> {
+    /// (0°, 180°); and refreshes the copy of their values that primal rays
+    /// read.
+    pub fn parameters_changed(&mut self, store: &ParamStore) -> Result<()> {
         if let Pose::Param(id) = self.pose {
             let rows: [f32; 16] = std::array::from_fn(|i| store.value(id, i));
             if Transform::new(Mat4::from_cols_array(&rows).transpose()).is_none() {
@@ -210,21 +228,48 @@ impl Sensor {
             }
         }
         match &self.camera {
-            Camera::Perspective(c) => c.frustum.check(store),
-            Camera::ThinLens(c) => c.frustum.check(store),
-            Camera::Orthographic(_) => Ok(()),
+            Camera::Perspective(c) => c.frustum.check(store)?,
+            Camera::ThinLens(c) => c.frustum.check(store)?,
+            Camera::Orthographic(_) => {}
+        }
+        let primal = store.primal();
+        self.primal = PrimalLens {
+            to_world: ToWorld::<f32>::read(&self.pose, &primal).0,
+            lens: self.read_lens::<f32>(&primal),
+        };
+        Ok(())
+    }
+
+    /// `tan(x_fov / 2)` and the principal point offset in `R` (zero for an
+    /// orthographic camera).
+    #[inline(always)]
+    fn read_lens<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
+        match &self.camera {
+            Camera::Perspective(c) => c.frustum.read(store),
+            Camera::ThinLens(c) => c.frustum.read(store),
+            Camera::Orthographic(_) => (R::cst(0.0), [R::cst(0.0); 2]),
         }
     }
 
     /// The ray through film position `film` (in [0,1]² over the full film,
     /// (0,0) = top-left) and lens position `lens` ∈ [0,1]², in `R`: origin
     /// and direction follow the sensor's parameters (see [`CameraSample`]).
+    /// In f32 the values refreshed by the last update are used (the same
+    /// numbers, without reading them again per ray).
     #[inline]
     pub fn ray<R: Real>(&self, store: &ParamView, film: Vec2, lens: Vec2) -> DiffRay<R> {
-        let to_world = ToWorld::read(&self.pose, store);
+        let (to_world, lens_params) = if R::DIFFERENTIABLE {
+            (ToWorld::read(&self.pose, store), self.read_lens(store))
+        } else {
+            let (tan_x, [ox, oy]) = self.primal.lens;
+            (
+                ToWorld(self.primal.to_world.map(R::cst)),
+                (R::cst(tan_x), [R::cst(ox), R::cst(oy)]),
+            )
+        };
         match &self.camera {
-            Camera::Perspective(c) => c.ray(store, &to_world, film),
-            Camera::ThinLens(c) => c.ray(store, &to_world, film, lens),
+            Camera::Perspective(c) => c.ray(&to_world, lens_params, film),
+            Camera::ThinLens(c) => c.ray(store, &to_world, lens_params, film, lens),
             Camera::Orthographic(c) => c.ray(&to_world, film),
         }
     }
@@ -238,8 +283,13 @@ impl Sensor {
     /// for the extra views of a multi-view optimisation. The pose is a
     /// constant of the copy: `<key>.to_world` no longer moves it.
     pub fn with_to_world(&self, to_world: Transform) -> Sensor {
+        let rows = to_world.m.transpose().to_cols_array();
         Sensor {
             pose: Pose::Fixed(to_world),
+            primal: PrimalLens {
+                to_world: rows,
+                ..self.primal
+            },
             ..self.clone()
         }
     }
@@ -394,7 +444,7 @@ impl Frustum {
 
     /// `tan(x_fov / 2)` and the principal point offset, in `R`.
     #[inline(always)]
-    fn read<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
+    pub(crate) fn read<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
         // `to_radians` spelled out, as the same f32 operations
         let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
         let offset = match self.principal_point_offset {
@@ -420,9 +470,10 @@ impl Frustum {
     /// `pos` ∈ [0,1]², as Mitsuba maps it: film x grows towards camera −x
     /// ("left" is +x), film y downwards, and the principal point offset is
     /// added to the film position before the mapping.
+    /// `lens` is `(tan(x_fov / 2), principal point offset)` as
+    /// [`Frustum::read`] gives them.
     #[inline(always)]
-    fn direction<R: Real>(&self, store: &ParamView, pos: Vec2) -> V3<R> {
-        let (tan_x, [ox, oy]) = self.read::<R>(store);
+    fn direction<R: Real>(&self, (tan_x, [ox, oy]): (R, [R; 2]), pos: Vec2) -> V3<R> {
         let x = (R::cst(1.0 - 2.0 * pos.x) - ox * 2.0) * tan_x;
         let y = (R::cst(1.0 - 2.0 * pos.y) - oy * 2.0) * tan_x / self.aspect;
         V3::new(x, y, R::cst(1.0))

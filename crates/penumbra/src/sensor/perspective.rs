@@ -7,7 +7,7 @@ use super::{Frustum, ToWorld};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::DiffRay;
-use crate::params::{ParamStore, ParamView};
+use crate::params::ParamStore;
 use crate::scene::Node;
 use glam::Vec2;
 
@@ -29,11 +29,11 @@ impl Perspective {
     #[inline]
     pub(crate) fn ray<R: Real>(
         &self,
-        store: &ParamView,
         to_world: &ToWorld<R>,
+        lens: (R, [R; 2]),
         pos: Vec2,
     ) -> DiffRay<R> {
-        let d = self.frustum.direction::<R>(store, pos).normalize();
+        let d = self.frustum.direction::<R>(lens, pos).normalize();
         // the clip distances are along the view axis
         let dz = d.z.val();
         DiffRay {

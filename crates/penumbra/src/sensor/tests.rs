@@ -147,9 +147,11 @@ fn check(scene: Scene, key: &str, tangent: &[f32], h: f32) {
             primal.d.val(),
             "{key}: Dual and f32 primal differ"
         );
+        // through Dual (no tangent): f32 rays read the sensor's copy of
+        // the values of the last update, not a shifted store
         let (p, m) = (
-            sensor.ray::<f32>(&plus.primal(), film, lens),
-            sensor.ray::<f32>(&minus.primal(), film, lens),
+            sensor.ray::<Dual>(&plus.primal(), film, lens).val(),
+            sensor.ray::<Dual>(&minus.primal(), film, lens).val(),
         );
         for (what, a, p, m) in [("origin", ad.o, p.o, m.o), ("direction", ad.d, p.d, m.d)] {
             for (k, (a, (p, m))) in [a.x, a.y, a.z]

@@ -57,11 +57,13 @@ impl ThinLens {
         &self,
         store: &ParamView,
         to_world: &ToWorld<R>,
+        lens_params: (R, [R; 2]),
         pos: Vec2,
         lens: Vec2,
     ) -> DiffRay<R> {
+        // d.z == 1
         let focus =
-            self.frustum.direction::<R>(store, pos) * store.read::<R>(self.focus_distance, 0); // d.z == 1
+            self.frustum.direction::<R>(lens_params, pos) * store.read::<R>(self.focus_distance, 0);
         let l = warp::square_to_uniform_disk_concentric(lens);
         let r = store.read::<R>(self.aperture_radius, 0);
         let o = V3::new(r * l.x, r * l.y, R::cst(0.0));
