@@ -12,7 +12,9 @@
 //!   shape becomes a [`Mesh`] (shape index = its position in the file);
 //! - `DIR/rays_KIND.bin`: `f32` `[n][8]`: origin, direction, tmin, tmax;
 //! - `QUERY`: `closest` or `occluded`; `THREADS`: the size of the rayon
-//!   pool, whose tasks are chunks of [`CHUNK`] rays; `REPS`: timed traces.
+//!   pool, whose tasks are chunks of [`CHUNK`] consecutive rays, each its
+//!   own unit of work stealing (as the Python `ray_intersect`; the C program
+//!   hands out chunks of as many rays from a counter); `REPS`: timed traces.
 //!
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
@@ -23,13 +25,14 @@ use glam::Vec3;
 use penumbra::geometry::{Accel, Mesh, MeshData, MeshOptions, Ray, Shape};
 use penumbra::math::Transform;
 use penumbra::params::ParamStore;
+use penumbra::scene::RAYS_PER_TASK;
 use rayon::prelude::*;
 use std::path::Path;
 use std::process::exit;
 use std::time::Instant;
 
 /// Rays per rayon task (as the C program's chunks).
-const CHUNK: usize = 1024;
+const CHUNK: usize = RAYS_PER_TASK;
 
 fn fail(msg: &str) -> ! {
     eprintln!("trace_rays: {msg}");
@@ -140,6 +143,7 @@ fn main() {
                 blocked
                     .par_chunks_mut(CHUNK)
                     .zip(rays.par_chunks(CHUNK))
+                    .with_max_len(1)
                     .for_each(|(out, rays)| {
                         for (o, r) in out.iter_mut().zip(rays) {
                             *o = accel.occluded(r);
@@ -148,6 +152,7 @@ fn main() {
             } else {
                 hits.par_chunks_mut(CHUNK)
                     .zip(rays.par_chunks(CHUNK))
+                    .with_max_len(1)
                     .for_each(|(out, rays)| {
                         for (o, r) in out.iter_mut().zip(rays) {
                             *o = accel.intersect(r).map_or((f32::INFINITY, -1, -1), |h| {
