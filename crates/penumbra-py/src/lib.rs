@@ -8,7 +8,8 @@
 //! reports progress; Rust errors become Python exceptions, and a panic in
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use numpy::ndarray::{ArrayView1, ArrayView2};
 use numpy::{
     AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLike1, PyArrayLike2, PyArrayMethods,
     PyReadonlyArrayDyn, PyUntypedArrayMethods,
@@ -19,12 +20,13 @@ use penumbra::image::{self, Image};
 use penumbra::integrator::{render, Integrator, RenderOptions, Rendered};
 use penumbra::optim::pose::{normals_key, Pose, PoseLayout};
 use penumbra::params::Domain;
-use penumbra::scene::{Class, Scene};
+use penumbra::scene::{Class, Scene, RAYS_PER_TASK};
 use penumbra::Error;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -253,42 +255,63 @@ impl PyIntegrator {
     }
 }
 
-/// A loaded scene: geometry, materials, emitters, sensors, integrator and
-/// the parameter store.
-/// The rays of `ray_intersect` / `ray_test`, with the shapes checked.
-fn rays_of(
-    origins: &PyArrayLike2<'_, f32, AllowTypeChange>,
-    directions: &PyArrayLike2<'_, f32, AllowTypeChange>,
-    tmax: Option<&PyArrayLike1<'_, f32, AllowTypeChange>>,
-) -> PyResult<Vec<Ray>> {
-    let (o, d) = (origins.as_array(), directions.as_array());
-    if o.ncols() != 3 || o.shape() != d.shape() {
-        return Err(PyValueError::new_err(format!(
-            "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
-            o.shape(),
-            d.shape()
-        )));
-    }
-    let tmax = tmax.map(|t| t.as_array());
-    if let Some(t) = &tmax {
-        if t.len() != o.nrows() {
+/// The rays of `ray_intersect` / `ray_test`: views of the caller's arrays
+/// (or of their float32 conversions), with the shapes checked. They are
+/// read on rayon's threads with the GIL released ([`RayArrays::ray`]), so
+/// that nothing proportional to the number of rays runs on the calling
+/// thread alone.
+struct RayArrays<'a> {
+    o: ArrayView2<'a, f32>,
+    d: ArrayView2<'a, f32>,
+    tmax: Option<ArrayView1<'a, f32>>,
+}
+
+impl<'a> RayArrays<'a> {
+    fn new(
+        origins: &'a PyArrayLike2<'_, f32, AllowTypeChange>,
+        directions: &'a PyArrayLike2<'_, f32, AllowTypeChange>,
+        tmax: Option<&'a PyArrayLike1<'_, f32, AllowTypeChange>>,
+    ) -> PyResult<RayArrays<'a>> {
+        let (o, d) = (origins.as_array(), directions.as_array());
+        if o.ncols() != 3 || o.shape() != d.shape() {
             return Err(PyValueError::new_err(format!(
-                "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
-                o.nrows(),
-                t.shape()
+                "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
+                o.shape(),
+                d.shape()
             )));
         }
+        let tmax = tmax.map(|t| t.as_array());
+        if let Some(t) = &tmax {
+            if t.len() != o.nrows() {
+                return Err(PyValueError::new_err(format!(
+                    "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
+                    o.nrows(),
+                    t.shape()
+                )));
+            }
+        }
+        Ok(RayArrays { o, d, tmax })
     }
-    Ok((0..o.nrows())
-        .map(|i| Ray {
+
+    fn len(&self) -> usize {
+        self.o.nrows()
+    }
+
+    /// Ray `i` (`i < len()`).
+    #[inline]
+    fn ray(&self, i: usize) -> Ray {
+        let (o, d) = (&self.o, &self.d);
+        Ray {
             o: Vec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]),
             d: Vec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]]),
             tmin: 0.0,
-            tmax: tmax.as_ref().map_or(f32::INFINITY, |t| t[i]),
-        })
-        .collect())
+            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t[i]),
+        }
+    }
 }
 
+/// A loaded scene: geometry, materials, emitters, sensors, integrator and
+/// the parameter store.
 #[pyclass(name = "Scene", module = "penumbra._core")]
 struct PyScene {
     inner: Scene,
@@ -370,8 +393,10 @@ impl PyScene {
     /// `prim_index` `(N,)` int32 (−1 where it misses; shapes in scene
     /// order, triangles in mesh order), `prim_uv` `(N, 2)` float32 (the
     /// barycentric coordinates of vertices 1 and 2 of the triangle, or the
-    /// shape's own surface coordinates). Traced in parallel with the GIL
-    /// released, on the scene as of its last `update()`.
+    /// shape's own surface coordinates). Traced on the scene as of its last
+    /// `update()`, in parallel (tasks of 1024 rays) with the GIL released;
+    /// float32 arrays are read in place, so no other thread may write to
+    /// them during the call.
     #[pyo3(signature = (origins, directions, tmax=None))]
     fn ray_intersect<'py>(
         &self,
@@ -380,25 +405,36 @@ impl PyScene {
         directions: PyArrayLike2<'py, f32, AllowTypeChange>,
         tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let rays = RayArrays::new(&origins, &directions, tmax.as_ref())?;
         let scene = &self.inner;
-        let hits = py.detach(|| scene.intersect_rays(&rays));
-        let n = hits.len();
+        let n = rays.len();
+        // zeroed allocations (calloc: no pass over them here); every
+        // element is written below, on rayon's threads
         let (mut t, mut shape, mut prim, mut uv) = (
-            vec![f32::INFINITY; n],
-            vec![-1i32; n],
-            vec![-1i32; n],
+            vec![0.0f32; n],
+            vec![0i32; n],
+            vec![0i32; n],
             vec![0.0f32; 2 * n],
         );
-        for (i, h) in hits.iter().enumerate() {
-            if let Some(h) = h {
-                t[i] = h.t;
-                shape[i] = h.shape as i32;
-                prim[i] = h.prim as i32;
-                uv[2 * i] = h.uv.x;
-                uv[2 * i + 1] = h.uv.y;
-            }
-        }
+        py.detach(|| {
+            t.par_chunks_mut(RAYS_PER_TASK)
+                .zip(shape.par_chunks_mut(RAYS_PER_TASK))
+                .zip(prim.par_chunks_mut(RAYS_PER_TASK))
+                .zip(uv.par_chunks_mut(2 * RAYS_PER_TASK))
+                .enumerate()
+                .with_max_len(1)
+                .for_each(|(task, (((t, shape), prim), uv))| {
+                    let first = task * RAYS_PER_TASK;
+                    for (k, t) in t.iter_mut().enumerate() {
+                        let h = scene.intersect(&rays.ray(first + k));
+                        let (s, p, u) = h.map_or((-1, -1, Vec2::ZERO), |h| {
+                            (h.shape as i32, h.prim as i32, h.uv)
+                        });
+                        *t = h.map_or(f32::INFINITY, |h| h.t);
+                        (shape[k], prim[k], uv[2 * k], uv[2 * k + 1]) = (s, p, u.x, u.y);
+                    }
+                })
+        });
         let out = PyDict::new(py);
         out.set_item("t", PyArray1::from_vec(py, t))?;
         out.set_item("shape_index", PyArray1::from_vec(py, shape))?;
@@ -417,12 +453,21 @@ impl PyScene {
         directions: PyArrayLike2<'py, f32, AllowTypeChange>,
         tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let rays = RayArrays::new(&origins, &directions, tmax.as_ref())?;
         let scene = &self.inner;
-        Ok(PyArray1::from_vec(
-            py,
-            py.detach(|| scene.occluded_rays(&rays)),
-        ))
+        let mut hit = vec![false; rays.len()];
+        py.detach(|| {
+            hit.par_chunks_mut(RAYS_PER_TASK)
+                .enumerate()
+                .with_max_len(1)
+                .for_each(|(task, hit)| {
+                    let first = task * RAYS_PER_TASK;
+                    for (k, h) in hit.iter_mut().enumerate() {
+                        *h = scene.occluded(&rays.ray(first + k));
+                    }
+                })
+        });
+        Ok(PyArray1::from_vec(py, hit))
     }
 
     /// Keys of all parameters, in scene order.
