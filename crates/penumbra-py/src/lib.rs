@@ -9,9 +9,9 @@
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
 use glam::{Vec2, Vec3};
-use numpy::ndarray::{ArrayView1, ArrayView2};
+use numpy::ndarray::{ArrayView, Dimension, Ix1, Ix2, NdIndex};
 use numpy::{
-    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLike1, PyArrayLike2, PyArrayMethods,
+    AllowTypeChange, PyArray, PyArray1, PyArrayDyn, PyArrayLike, PyArrayMethods, PyReadonlyArray,
     PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use penumbra::diff::{gradient_seed as derive_gradient_seed, render_backward, render_forward};
@@ -255,37 +255,88 @@ impl PyIntegrator {
     }
 }
 
-/// The rays of `ray_intersect` / `ray_test`: views of the caller's arrays
-/// (or of their float32 conversions), with the shapes checked. They are
-/// read on rayon's threads with the GIL released ([`RayArrays::ray`]), so
-/// that nothing proportional to the number of rays runs on the calling
-/// thread alone.
+/// A float array argument of `ray_intersect` / `ray_test`. float32 and
+/// float64 arrays are read in place (float64 rounded to float32 per
+/// element, as numpy's `astype(float32)` rounds): numpy's conversion would
+/// be a pass over the rays on the calling thread. Anything else (lists,
+/// other dtypes) is converted to float32 by numpy.
+enum Floats<'py, D: Dimension> {
+    F32(PyArrayLike<'py, f32, D, AllowTypeChange>),
+    F64(PyReadonlyArray<'py, f64, D>),
+}
+
+impl<'py, D: Dimension + 'static> Floats<'py, D> {
+    fn extract(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+        if let Ok(a) = obj.cast::<PyArray<f64, D>>() {
+            return Ok(Floats::F64(a.try_readonly()?));
+        }
+        obj.extract().map(Floats::F32).map_err(|e| {
+            let msg = format!("argument '{name}': {}", e.value(obj.py()));
+            PyErr::from_type(e.get_type(obj.py()), msg)
+        })
+    }
+
+    fn view(&self) -> FloatView<'_, D> {
+        match self {
+            Floats::F32(a) => FloatView::F32(a.as_array()),
+            Floats::F64(a) => FloatView::F64(a.as_array()),
+        }
+    }
+}
+
+/// A view of a [`Floats`], read as float32.
+enum FloatView<'a, D: Dimension> {
+    F32(ArrayView<'a, f32, D>),
+    F64(ArrayView<'a, f64, D>),
+}
+
+impl<D: Dimension> FloatView<'_, D> {
+    fn shape(&self) -> &[usize] {
+        match self {
+            FloatView::F32(a) => a.shape(),
+            FloatView::F64(a) => a.shape(),
+        }
+    }
+
+    #[inline]
+    fn get<I: NdIndex<D>>(&self, i: I) -> f32 {
+        match self {
+            FloatView::F32(a) => a[i],
+            FloatView::F64(a) => a[i] as f32,
+        }
+    }
+}
+
+/// The rays of `ray_intersect` / `ray_test`: views of the caller's arrays,
+/// with the shapes checked. They are read on rayon's threads with the GIL
+/// released ([`RayArrays::ray`]), so that nothing proportional to the
+/// number of rays runs on the calling thread alone.
 struct RayArrays<'a> {
-    o: ArrayView2<'a, f32>,
-    d: ArrayView2<'a, f32>,
-    tmax: Option<ArrayView1<'a, f32>>,
+    o: FloatView<'a, Ix2>,
+    d: FloatView<'a, Ix2>,
+    tmax: Option<FloatView<'a, Ix1>>,
 }
 
 impl<'a> RayArrays<'a> {
     fn new(
-        origins: &'a PyArrayLike2<'_, f32, AllowTypeChange>,
-        directions: &'a PyArrayLike2<'_, f32, AllowTypeChange>,
-        tmax: Option<&'a PyArrayLike1<'_, f32, AllowTypeChange>>,
+        origins: &'a Floats<'_, Ix2>,
+        directions: &'a Floats<'_, Ix2>,
+        tmax: Option<&'a Floats<'_, Ix1>>,
     ) -> PyResult<RayArrays<'a>> {
-        let (o, d) = (origins.as_array(), directions.as_array());
-        if o.ncols() != 3 || o.shape() != d.shape() {
+        let (o, d) = (origins.view(), directions.view());
+        if o.shape()[1] != 3 || o.shape() != d.shape() {
             return Err(PyValueError::new_err(format!(
                 "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
                 o.shape(),
                 d.shape()
             )));
         }
-        let tmax = tmax.map(|t| t.as_array());
+        let tmax = tmax.map(|t| t.view());
         if let Some(t) = &tmax {
-            if t.len() != o.nrows() {
+            if t.shape()[0] != o.shape()[0] {
                 return Err(PyValueError::new_err(format!(
                     "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
-                    o.nrows(),
+                    o.shape()[0],
                     t.shape()
                 )));
             }
@@ -294,7 +345,7 @@ impl<'a> RayArrays<'a> {
     }
 
     fn len(&self) -> usize {
-        self.o.nrows()
+        self.o.shape()[0]
     }
 
     /// Ray `i` (`i < len()`).
@@ -302,10 +353,10 @@ impl<'a> RayArrays<'a> {
     fn ray(&self, i: usize) -> Ray {
         let (o, d) = (&self.o, &self.d);
         Ray {
-            o: Vec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]),
-            d: Vec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]]),
+            o: Vec3::new(o.get([i, 0]), o.get([i, 1]), o.get([i, 2])),
+            d: Vec3::new(d.get([i, 0]), d.get([i, 1]), d.get([i, 2])),
             tmin: 0.0,
-            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t[i]),
+            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t.get(i)),
         }
     }
 }
@@ -395,17 +446,22 @@ impl PyScene {
     /// barycentric coordinates of vertices 1 and 2 of the triangle, or the
     /// shape's own surface coordinates). Traced on the scene as of its last
     /// `update()`, in parallel (tasks of 1024 rays) with the GIL released;
-    /// float32 arrays are read in place, so no other thread may write to
-    /// them during the call.
+    /// float32 and float64 arrays are read in place, so no other thread may
+    /// write to them during the call.
     #[pyo3(signature = (origins, directions, tmax=None))]
     fn ray_intersect<'py>(
         &self,
         py: Python<'py>,
-        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
-        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
-        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tmax: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let rays = RayArrays::new(&origins, &directions, tmax.as_ref())?;
+        let (o, d) = (
+            Floats::extract("origins", origins)?,
+            Floats::extract("directions", directions)?,
+        );
+        let tmax = tmax.map(|t| Floats::extract("tmax", t)).transpose()?;
+        let rays = RayArrays::new(&o, &d, tmax.as_ref())?;
         let scene = &self.inner;
         let n = rays.len();
         // zeroed allocations (calloc: no pass over them here); every
@@ -449,11 +505,16 @@ impl PyScene {
     fn ray_test<'py>(
         &self,
         py: Python<'py>,
-        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
-        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
-        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tmax: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let rays = RayArrays::new(&origins, &directions, tmax.as_ref())?;
+        let (o, d) = (
+            Floats::extract("origins", origins)?,
+            Floats::extract("directions", directions)?,
+        );
+        let tmax = tmax.map(|t| Floats::extract("tmax", t)).transpose()?;
+        let rays = RayArrays::new(&o, &d, tmax.as_ref())?;
         let scene = &self.inner;
         let mut hit = vec![false; rays.len()];
         py.detach(|| {
