@@ -9,7 +9,7 @@
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
 use glam::{Vec2, Vec3};
-use numpy::ndarray::{ArrayView, Dimension, Ix1, Ix2, NdIndex};
+use numpy::ndarray::{ArrayView, Dimension, Ix1, Ix2};
 use numpy::{
     AllowTypeChange, PyArray, PyArray1, PyArrayDyn, PyArrayLike, PyArrayMethods, PyReadonlyArray,
     PyReadonlyArrayDyn, PyUntypedArrayMethods,
@@ -277,32 +277,66 @@ impl<'py, D: Dimension + 'static> Floats<'py, D> {
     }
 
     fn view(&self) -> FloatView<'_, D> {
-        match self {
-            Floats::F32(a) => FloatView::F32(a.as_array()),
-            Floats::F64(a) => FloatView::F64(a.as_array()),
-        }
+        let (shape, data) = match self {
+            Floats::F32(a) => {
+                let v = a.as_array();
+                let shape = v.shape().to_vec();
+                (
+                    shape,
+                    v.to_slice().map_or(Data::Strided32(v), Data::Packed32),
+                )
+            }
+            Floats::F64(a) => {
+                let v = a.as_array();
+                let shape = v.shape().to_vec();
+                (
+                    shape,
+                    v.to_slice().map_or(Data::Strided64(v), Data::Packed64),
+                )
+            }
+        };
+        FloatView { shape, data }
     }
 }
 
-/// A view of a [`Floats`], read as float32.
-enum FloatView<'a, D: Dimension> {
-    F32(ArrayView<'a, f32, D>),
-    F64(ArrayView<'a, f64, D>),
+/// A view of a [`Floats`], read as float32: row-major contiguous data (the
+/// usual case) as a slice, indexed directly; anything else strided.
+struct FloatView<'a, D: Dimension> {
+    shape: Vec<usize>,
+    data: Data<'a, D>,
 }
 
-impl<D: Dimension> FloatView<'_, D> {
-    fn shape(&self) -> &[usize] {
-        match self {
-            FloatView::F32(a) => a.shape(),
-            FloatView::F64(a) => a.shape(),
-        }
-    }
+enum Data<'a, D: Dimension> {
+    Packed32(&'a [f32]),
+    Packed64(&'a [f64]),
+    Strided32(ArrayView<'a, f32, D>),
+    Strided64(ArrayView<'a, f64, D>),
+}
 
+impl FloatView<'_, Ix2> {
+    /// Row `i` of an `(N, 3)` array.
     #[inline]
-    fn get<I: NdIndex<D>>(&self, i: I) -> f32 {
-        match self {
-            FloatView::F32(a) => a[i],
-            FloatView::F64(a) => a[i] as f32,
+    fn row3(&self, i: usize) -> Vec3 {
+        match &self.data {
+            Data::Packed32(s) => Vec3::from_slice(&s[3 * i..3 * i + 3]),
+            Data::Packed64(s) => {
+                let r = &s[3 * i..3 * i + 3];
+                Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32)
+            }
+            Data::Strided32(a) => Vec3::new(a[[i, 0]], a[[i, 1]], a[[i, 2]]),
+            Data::Strided64(a) => Vec3::new(a[[i, 0]] as f32, a[[i, 1]] as f32, a[[i, 2]] as f32),
+        }
+    }
+}
+
+impl FloatView<'_, Ix1> {
+    #[inline]
+    fn at(&self, i: usize) -> f32 {
+        match &self.data {
+            Data::Packed32(s) => s[i],
+            Data::Packed64(s) => s[i] as f32,
+            Data::Strided32(a) => a[i],
+            Data::Strided64(a) => a[i] as f32,
         }
     }
 }
@@ -324,20 +358,18 @@ impl<'a> RayArrays<'a> {
         tmax: Option<&'a Floats<'_, Ix1>>,
     ) -> PyResult<RayArrays<'a>> {
         let (o, d) = (origins.view(), directions.view());
-        if o.shape()[1] != 3 || o.shape() != d.shape() {
+        if o.shape[1] != 3 || o.shape != d.shape {
             return Err(PyValueError::new_err(format!(
                 "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
-                o.shape(),
-                d.shape()
+                o.shape, d.shape
             )));
         }
         let tmax = tmax.map(|t| t.view());
         if let Some(t) = &tmax {
-            if t.shape()[0] != o.shape()[0] {
+            if t.shape[0] != o.shape[0] {
                 return Err(PyValueError::new_err(format!(
                     "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
-                    o.shape()[0],
-                    t.shape()
+                    o.shape[0], t.shape
                 )));
             }
         }
@@ -345,18 +377,17 @@ impl<'a> RayArrays<'a> {
     }
 
     fn len(&self) -> usize {
-        self.o.shape()[0]
+        self.o.shape[0]
     }
 
     /// Ray `i` (`i < len()`).
     #[inline]
     fn ray(&self, i: usize) -> Ray {
-        let (o, d) = (&self.o, &self.d);
         Ray {
-            o: Vec3::new(o.get([i, 0]), o.get([i, 1]), o.get([i, 2])),
-            d: Vec3::new(d.get([i, 0]), d.get([i, 1]), d.get([i, 2])),
+            o: self.o.row3(i),
+            d: self.d.row3(i),
             tmin: 0.0,
-            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t.get(i)),
+            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t.at(i)),
         }
     }
 }
