@@ -17,8 +17,8 @@ two kinds. Origins are offset 1e-4 along the reversed incoming direction.
 
 What runs (each configuration in its own process, interleaved kind by
 kind and thread count by thread count so that all share the machine's
-load; each times --reps traces of all the rays of one kind, and the
-median gives millions of rays per second):
+load; each times --reps traces of all the rays of one kind after one
+untimed warm-up trace, and the median gives millions of rays per second):
   Embree     scripts/embree_bench/bench.c, compiled here with gcc against
              Debian's libembree-dev (Embree 3): one geometry per shape,
              Embree's default build quality (RTC_BUILD_QUALITY_MEDIUM) and
@@ -37,7 +37,9 @@ native Penumbra (same hit/miss; |t − t_embree| ≤ 1e-4 · max(1, t) where
 both hit; same shape and triangle), Python against native Penumbra (bit
 for bit) and N threads against 1 thread (bit for bit). Writes a Markdown
 table to --md (default docs/bench_rays.md) with the machine, the load
-average (`uptime`) and the versions.
+average (`uptime`), the versions, and for each row the share of the
+machine's CPU that other processes used while it was measured (on a shared
+machine, a row measured beside a build shows the build, not the scaling).
 
 --baseline-python PY adds the Python calls of another interpreter, e.g. a
 virtualenv holding the wheel of an earlier commit (--baseline-label names
@@ -58,6 +60,7 @@ import datetime
 import json
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -162,13 +165,14 @@ def worker(a):
     o, d = np.ascontiguousarray(r[:, 0:3]), np.ascontiguousarray(r[:, 3:6])
     tmax = np.ascontiguousarray(r[:, 7])
     times = []
-    for _ in range(a.reps):
+    for rep in range(a.reps + 1):  # the first call is a warm-up, not timed
         t0 = time.perf_counter()
         if a.query == "occluded":
             hit = scene.ray_test(o, d, tmax=tmax)
         else:
             hit = scene.ray_intersect(o, d)
-        times.append(time.perf_counter() - t0)
+        if rep:
+            times.append(time.perf_counter() - t0)
     if a.query == "occluded":
         out = hit.astype(np.uint8)
     else:
@@ -179,12 +183,32 @@ def worker(a):
                                       build_s=build, times=times, numpy=np.__version__)))
 
 
+def cpu_jiffies():
+    """Busy and total CPU time of the machine so far (/proc/stat, jiffies),
+    or None where there is no /proc."""
+    try:
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+    except OSError:
+        return None
+    return sum(v) - v[3] - v[4], sum(v)  # not idle, not iowait
+
+
 def run(cmd, env=None):
+    """Runs one measuring process; its RESULT, with `others`: the share of
+    the machine's CPU time that other processes used meanwhile (the load
+    this measurement shared the cores with)."""
+    s0, c0 = cpu_jiffies(), resource.getrusage(resource.RUSAGE_CHILDREN)
     r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    s1, c1 = cpu_jiffies(), resource.getrusage(resource.RUSAGE_CHILDREN)
     line = next((l for l in r.stdout.splitlines() if l.startswith("RESULT ")), None)
     if r.returncode != 0 or line is None:
         raise SystemExit(f"bench_rays.py: {' '.join(cmd)} failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
-    return json.loads(line[7:])
+    out = json.loads(line[7:])
+    if s0 and s1 and s1[1] > s0[1]:
+        mine = (c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime) * os.sysconf("SC_CLK_TCK")
+        out["others"] = max(0.0, (s1[0] - s0[0] - mine) / (s1[1] - s0[1]))
+    return out
 
 
 def build_tools(folder):
@@ -312,8 +336,8 @@ def main():
         "Python = `Scene.ray_intersect`/`ray_test` with `RAYON_NUM_THREADS`:",
         "",
         "| rays | query | count | threads | Embree | Penumbra native | native / Embree | Penumbra Python | Python / Embree |"
-        + (" Python, before | after / before |" if a.baseline_python else ""),
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|" if a.baseline_python else ""),
+        + (" Python, before | after / before |" if a.baseline_python else "") + " others' CPU |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|" if a.baseline_python else "") + "---:|",
     ]
     for kind, query in KINDS:
         for n in threads:
@@ -322,8 +346,13 @@ def main():
                    f"{m['native'] / m['embree']:.2f} | {m['python']:.2f} | {m['python'] / m['embree']:.2f} |")
             if a.baseline_python:
                 row += f" {m['base']:.2f} | {m['python'] / m['base']:.2f} |"
+            others = [r["others"] for (s, k, t), r in res.items() if k == kind and t == n and "others" in r]
+            row += f" {max(others):.0%} |" if others else " — |"
             lines.append(row)
     lines += [
+        "",
+        "Others' CPU: the largest share of the machine's CPU time that other processes used while the row's "
+        "processes ran (from /proc/stat, less the measuring process's own time): the load the figures shared.",
         "",
         f"Scaling, {threads[-1]} threads / 1 thread: "
         + "; ".join(f"{kind} Embree {res['embree', kind, threads[-1]]['mrays'] / res['embree', kind, 1]['mrays']:.2f}, "

@@ -14,7 +14,8 @@
  *   QUERY                  closest (rtcIntersect1) or occluded (rtcOccluded1)
  *   THREADS                rays split in chunks of CHUNK rays, handed out
  *                          by an atomic counter to THREADS pthreads
- *   REPS                   traces of all the rays; each timed
+ *   REPS                   traces of all the rays, each timed, after one
+ *                          untimed (warm-up)
  *   robust                 RTC_SCENE_FLAG_ROBUST (default: no scene flags)
  * The build uses Embree's default quality (RTC_BUILD_QUALITY_MEDIUM) and
  * THREADS build threads; it is timed apart. Writes the hits of the last
@@ -165,14 +166,14 @@ int main(int argc, char **argv) {
     printf("RESULT {\"side\": \"embree\", \"kind\": \"%s\", \"threads\": %d, \"rays\": %zu, "
            "\"triangles\": %u, \"build_s\": %.6f, \"times\": [",
            kind, threads, j.n, tris, build);
-    for (int r = 0; r < reps; r++) {
+    for (int r = -1; r < reps; r++) { /* r = -1: a warm-up trace, not timed */
         atomic_store(&j.next, 0);
         double s = now();
         for (int k = 1; k < threads; k++)
             if (pthread_create(&th[k], NULL, worker, &j)) die("pthread_create");
         worker(&j); /* the calling thread is one of the THREADS */
         for (int k = 1; k < threads; k++) pthread_join(th[k], NULL);
-        printf("%s%.6f", r ? ", " : "", now() - s);
+        if (r >= 0) printf("%s%.6f", r ? ", " : "", now() - s);
     }
     printf("], \"embree\": \"%s\", \"robust\": %s}\n", RTC_VERSION_STRING,
            robust ? "true" : "false");

@@ -14,7 +14,8 @@
 //! - `QUERY`: `closest` or `occluded`; `THREADS`: the size of the rayon
 //!   pool, whose tasks are chunks of [`CHUNK`] consecutive rays, each its
 //!   own unit of work stealing (as the Python `ray_intersect`; the C program
-//!   hands out chunks of as many rays from a counter); `REPS`: timed traces.
+//!   hands out chunks of as many rays from a counter); `REPS`: timed traces
+//!   (after one untimed warm-up trace).
 //!
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
@@ -136,7 +137,8 @@ fn main() {
     let mut hits = vec![(f32::INFINITY, -1i32, -1i32); rays.len()];
     let mut blocked = vec![false; rays.len()];
     let mut times = Vec::with_capacity(reps);
-    for _ in 0..reps {
+    // one untimed trace first (warm-up), then REPS timed ones
+    for rep in 0..=reps {
         let t = Instant::now();
         pool.install(|| {
             if occluded {
@@ -162,7 +164,9 @@ fn main() {
                     });
             }
         });
-        times.push(t.elapsed().as_secs_f64());
+        if rep > 0 {
+            times.push(t.elapsed().as_secs_f64());
+        }
     }
 
     let mut bytes = Vec::with_capacity(12 * rays.len());
