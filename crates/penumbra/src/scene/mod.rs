@@ -305,3 +305,45 @@ impl Scene {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn batch_queries_equal_one_ray_at_a_time() {
+        // a sphere before a rectangle; rays over both and past them, more
+        // than a few tasks' worth and not a multiple of RAYS_PER_TASK
+        let scene = Scene::load_str(
+            r#"<scene version="3.0.0">
+                <sensor type="perspective"/>
+                <shape type="sphere"/>
+                <shape type="rectangle">
+                    <transform name="to_world"><scale value="3"/><translate z="2"/></transform>
+                </shape>
+            </scene>"#,
+            Path::new("t.xml"),
+            &[],
+        )
+        .unwrap();
+        let n = 5 * RAYS_PER_TASK + 17;
+        let rays: Vec<Ray> = (0..n)
+            .map(|i| {
+                let (x, y) = ((i % 101) as f32 / 25.0 - 2.0, (i / 101) as f32 / 13.0 - 2.0);
+                let mut r = Ray::new(Vec3::new(x, y, -5.0), Vec3::new(0.01 * x, 0.0, 1.0));
+                r.tmax = if i % 3 == 0 { 5.5 } else { f32::INFINITY };
+                r
+            })
+            .collect();
+        let hits = scene.intersect_rays(&rays);
+        let blocked = scene.occluded_rays(&rays);
+        assert_eq!((hits.len(), blocked.len()), (n, n));
+        let key = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.shape, h.prim, h.uv.to_array()));
+        for (i, r) in rays.iter().enumerate() {
+            assert_eq!(key(hits[i]), key(scene.intersect(r)), "ray {i}");
+            assert_eq!(blocked[i], scene.occluded(r), "ray {i}");
+        }
+        let shapes: Vec<u32> = hits.iter().flatten().map(|h| h.shape).collect();
+        assert!(shapes.contains(&0) && shapes.contains(&1) && shapes.len() < n);
+    }
+}
