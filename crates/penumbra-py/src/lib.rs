@@ -8,9 +8,10 @@
 //! reports progress; Rust errors become Python exceptions, and a panic in
 //! the library becomes a `RuntimeError` instead of killing the interpreter.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use numpy::ndarray::{ArrayView, Dimension, Ix1, Ix2};
 use numpy::{
-    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLike1, PyArrayLike2, PyArrayMethods,
+    AllowTypeChange, PyArray, PyArray1, PyArrayDyn, PyArrayLike, PyArrayMethods, PyReadonlyArray,
     PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use penumbra::diff::{gradient_seed as derive_gradient_seed, render_backward, render_forward};
@@ -19,12 +20,13 @@ use penumbra::image::{self, Image};
 use penumbra::integrator::{render, Integrator, RenderOptions, Rendered};
 use penumbra::optim::pose::{normals_key, Pose, PoseLayout};
 use penumbra::params::Domain;
-use penumbra::scene::{Class, Scene};
+use penumbra::scene::{Class, Scene, RAYS_PER_TASK};
 use penumbra::Error;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -253,42 +255,145 @@ impl PyIntegrator {
     }
 }
 
-/// A loaded scene: geometry, materials, emitters, sensors, integrator and
-/// the parameter store.
-/// The rays of `ray_intersect` / `ray_test`, with the shapes checked.
-fn rays_of(
-    origins: &PyArrayLike2<'_, f32, AllowTypeChange>,
-    directions: &PyArrayLike2<'_, f32, AllowTypeChange>,
-    tmax: Option<&PyArrayLike1<'_, f32, AllowTypeChange>>,
-) -> PyResult<Vec<Ray>> {
-    let (o, d) = (origins.as_array(), directions.as_array());
-    if o.ncols() != 3 || o.shape() != d.shape() {
-        return Err(PyValueError::new_err(format!(
-            "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
-            o.shape(),
-            d.shape()
-        )));
-    }
-    let tmax = tmax.map(|t| t.as_array());
-    if let Some(t) = &tmax {
-        if t.len() != o.nrows() {
-            return Err(PyValueError::new_err(format!(
-                "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
-                o.nrows(),
-                t.shape()
-            )));
-        }
-    }
-    Ok((0..o.nrows())
-        .map(|i| Ray {
-            o: Vec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]),
-            d: Vec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]]),
-            tmin: 0.0,
-            tmax: tmax.as_ref().map_or(f32::INFINITY, |t| t[i]),
-        })
-        .collect())
+/// A float array argument of `ray_intersect` / `ray_test`. float32 and
+/// float64 arrays are read in place (float64 rounded to float32 per
+/// element, as numpy's `astype(float32)` rounds): numpy's conversion would
+/// be a pass over the rays on the calling thread. Anything else (lists,
+/// other dtypes) is converted to float32 by numpy.
+enum Floats<'py, D: Dimension> {
+    F32(PyArrayLike<'py, f32, D, AllowTypeChange>),
+    F64(PyReadonlyArray<'py, f64, D>),
 }
 
+impl<'py, D: Dimension + 'static> Floats<'py, D> {
+    fn extract(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+        if let Ok(a) = obj.cast::<PyArray<f64, D>>() {
+            return Ok(Floats::F64(a.try_readonly()?));
+        }
+        obj.extract().map(Floats::F32).map_err(|e| {
+            let msg = format!("argument '{name}': {}", e.value(obj.py()));
+            PyErr::from_type(e.get_type(obj.py()), msg)
+        })
+    }
+
+    fn view(&self) -> FloatView<'_, D> {
+        let (shape, data) = match self {
+            Floats::F32(a) => {
+                let v = a.as_array();
+                let shape = v.shape().to_vec();
+                (
+                    shape,
+                    v.to_slice().map_or(Data::Strided32(v), Data::Packed32),
+                )
+            }
+            Floats::F64(a) => {
+                let v = a.as_array();
+                let shape = v.shape().to_vec();
+                (
+                    shape,
+                    v.to_slice().map_or(Data::Strided64(v), Data::Packed64),
+                )
+            }
+        };
+        FloatView { shape, data }
+    }
+}
+
+/// A view of a [`Floats`], read as float32: row-major contiguous data (the
+/// usual case) as a slice, indexed directly; anything else strided.
+struct FloatView<'a, D: Dimension> {
+    shape: Vec<usize>,
+    data: Data<'a, D>,
+}
+
+enum Data<'a, D: Dimension> {
+    Packed32(&'a [f32]),
+    Packed64(&'a [f64]),
+    Strided32(ArrayView<'a, f32, D>),
+    Strided64(ArrayView<'a, f64, D>),
+}
+
+impl FloatView<'_, Ix2> {
+    /// Row `i` of an `(N, 3)` array.
+    #[inline]
+    fn row3(&self, i: usize) -> Vec3 {
+        match &self.data {
+            Data::Packed32(s) => Vec3::from_slice(&s[3 * i..3 * i + 3]),
+            Data::Packed64(s) => {
+                let r = &s[3 * i..3 * i + 3];
+                Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32)
+            }
+            Data::Strided32(a) => Vec3::new(a[[i, 0]], a[[i, 1]], a[[i, 2]]),
+            Data::Strided64(a) => Vec3::new(a[[i, 0]] as f32, a[[i, 1]] as f32, a[[i, 2]] as f32),
+        }
+    }
+}
+
+impl FloatView<'_, Ix1> {
+    #[inline]
+    fn at(&self, i: usize) -> f32 {
+        match &self.data {
+            Data::Packed32(s) => s[i],
+            Data::Packed64(s) => s[i] as f32,
+            Data::Strided32(a) => a[i],
+            Data::Strided64(a) => a[i] as f32,
+        }
+    }
+}
+
+/// The rays of `ray_intersect` / `ray_test`: views of the caller's arrays,
+/// with the shapes checked. They are read on rayon's threads with the GIL
+/// released ([`RayArrays::ray`]), so that nothing proportional to the
+/// number of rays runs on the calling thread alone.
+struct RayArrays<'a> {
+    o: FloatView<'a, Ix2>,
+    d: FloatView<'a, Ix2>,
+    tmax: Option<FloatView<'a, Ix1>>,
+}
+
+impl<'a> RayArrays<'a> {
+    fn new(
+        origins: &'a Floats<'_, Ix2>,
+        directions: &'a Floats<'_, Ix2>,
+        tmax: Option<&'a Floats<'_, Ix1>>,
+    ) -> PyResult<RayArrays<'a>> {
+        let (o, d) = (origins.view(), directions.view());
+        if o.shape[1] != 3 || o.shape != d.shape {
+            return Err(PyValueError::new_err(format!(
+                "origins and directions must both be (N, 3) arrays; got {:?} and {:?}",
+                o.shape, d.shape
+            )));
+        }
+        let tmax = tmax.map(|t| t.view());
+        if let Some(t) = &tmax {
+            if t.shape[0] != o.shape[0] {
+                return Err(PyValueError::new_err(format!(
+                    "tmax must be an (N,) array with N = {} (one per ray); got {:?}",
+                    o.shape[0], t.shape
+                )));
+            }
+        }
+        Ok(RayArrays { o, d, tmax })
+    }
+
+    fn len(&self) -> usize {
+        self.o.shape[0]
+    }
+
+    /// Ray `i` (`i < len()`).
+    #[inline]
+    fn ray(&self, i: usize) -> Ray {
+        Ray {
+            o: self.o.row3(i),
+            d: self.d.row3(i),
+            tmin: 0.0,
+            tmax: self.tmax.as_ref().map_or(f32::INFINITY, |t| t.at(i)),
+        }
+    }
+}
+
+/// A loaded scene: geometry, materials, emitters, sensors, integrator and
+/// the parameter store.
 #[pyclass(name = "Scene", module = "penumbra._core")]
 struct PyScene {
     inner: Scene,
@@ -370,35 +475,53 @@ impl PyScene {
     /// `prim_index` `(N,)` int32 (−1 where it misses; shapes in scene
     /// order, triangles in mesh order), `prim_uv` `(N, 2)` float32 (the
     /// barycentric coordinates of vertices 1 and 2 of the triangle, or the
-    /// shape's own surface coordinates). Traced in parallel with the GIL
-    /// released, on the scene as of its last `update()`.
+    /// shape's own surface coordinates). Traced on the scene as of its last
+    /// `update()`, in parallel (tasks of 1024 rays) with the GIL released;
+    /// float32 and float64 arrays are read in place, so no other thread may
+    /// write to them during the call.
     #[pyo3(signature = (origins, directions, tmax=None))]
     fn ray_intersect<'py>(
         &self,
         py: Python<'py>,
-        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
-        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
-        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tmax: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let (o, d) = (
+            Floats::extract("origins", origins)?,
+            Floats::extract("directions", directions)?,
+        );
+        let tmax = tmax.map(|t| Floats::extract("tmax", t)).transpose()?;
+        let rays = RayArrays::new(&o, &d, tmax.as_ref())?;
         let scene = &self.inner;
-        let hits = py.detach(|| scene.intersect_rays(&rays));
-        let n = hits.len();
+        let n = rays.len();
+        // zeroed allocations (calloc: no pass over them here); every
+        // element is written below, on rayon's threads
         let (mut t, mut shape, mut prim, mut uv) = (
-            vec![f32::INFINITY; n],
-            vec![-1i32; n],
-            vec![-1i32; n],
+            vec![0.0f32; n],
+            vec![0i32; n],
+            vec![0i32; n],
             vec![0.0f32; 2 * n],
         );
-        for (i, h) in hits.iter().enumerate() {
-            if let Some(h) = h {
-                t[i] = h.t;
-                shape[i] = h.shape as i32;
-                prim[i] = h.prim as i32;
-                uv[2 * i] = h.uv.x;
-                uv[2 * i + 1] = h.uv.y;
-            }
-        }
+        py.detach(|| {
+            t.par_chunks_mut(RAYS_PER_TASK)
+                .zip(shape.par_chunks_mut(RAYS_PER_TASK))
+                .zip(prim.par_chunks_mut(RAYS_PER_TASK))
+                .zip(uv.par_chunks_mut(2 * RAYS_PER_TASK))
+                .enumerate()
+                .with_max_len(1)
+                .for_each(|(task, (((t, shape), prim), uv))| {
+                    let first = task * RAYS_PER_TASK;
+                    for (k, t) in t.iter_mut().enumerate() {
+                        let h = scene.intersect(&rays.ray(first + k));
+                        let (s, p, u) = h.map_or((-1, -1, Vec2::ZERO), |h| {
+                            (h.shape as i32, h.prim as i32, h.uv)
+                        });
+                        *t = h.map_or(f32::INFINITY, |h| h.t);
+                        (shape[k], prim[k], uv[2 * k], uv[2 * k + 1]) = (s, p, u.x, u.y);
+                    }
+                })
+        });
         let out = PyDict::new(py);
         out.set_item("t", PyArray1::from_vec(py, t))?;
         out.set_item("shape_index", PyArray1::from_vec(py, shape))?;
@@ -413,16 +536,30 @@ impl PyScene {
     fn ray_test<'py>(
         &self,
         py: Python<'py>,
-        origins: PyArrayLike2<'py, f32, AllowTypeChange>,
-        directions: PyArrayLike2<'py, f32, AllowTypeChange>,
-        tmax: Option<PyArrayLike1<'py, f32, AllowTypeChange>>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tmax: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let rays = rays_of(&origins, &directions, tmax.as_ref())?;
+        let (o, d) = (
+            Floats::extract("origins", origins)?,
+            Floats::extract("directions", directions)?,
+        );
+        let tmax = tmax.map(|t| Floats::extract("tmax", t)).transpose()?;
+        let rays = RayArrays::new(&o, &d, tmax.as_ref())?;
         let scene = &self.inner;
-        Ok(PyArray1::from_vec(
-            py,
-            py.detach(|| scene.occluded_rays(&rays)),
-        ))
+        let mut hit = vec![false; rays.len()];
+        py.detach(|| {
+            hit.par_chunks_mut(RAYS_PER_TASK)
+                .enumerate()
+                .with_max_len(1)
+                .for_each(|(task, hit)| {
+                    let first = task * RAYS_PER_TASK;
+                    for (k, h) in hit.iter_mut().enumerate() {
+                        *h = scene.occluded(&rays.ray(first + k));
+                    }
+                })
+        });
+        Ok(PyArray1::from_vec(py, hit))
     }
 
     /// Keys of all parameters, in scene order.
