@@ -176,3 +176,45 @@ def test_variants_are_named_as_mitsuba_and_others_are_refused():
             pn.set_variant()
     finally:
         pn.set_variant("llvm_ad_rgb")
+
+
+def test_load_dict_shapegroups_and_instances_as_mitsuba():
+    # Mitsuba's documented dict form: the group's shapes keyed by their dict
+    # keys under the group, instances referencing the group by 'ref'
+    d = {
+        "type": "scene",
+        "sensor": {
+            "type": "perspective",
+            "to_world": pn.Transform4f().look_at(origin=[0, 0, 6], target=[0, 0, 0], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": 16, "height": 16},
+        },
+        "light": {"type": "constant"},
+        "grp": {
+            "type": "shapegroup",
+            "first": {"type": "sphere", "radius": 0.5,
+                      "bsdf": {"type": "diffuse",
+                               "reflectance": {"type": "rgb", "value": [0.8, 0.2, 0.1]}}},
+            "second": {"type": "cube", "to_world": pn.Transform4f().translate([0, 1, 0]).scale(0.3)},
+        },
+        "a": {"type": "instance", "shapegroup": {"type": "ref", "id": "grp"},
+              "to_world": pn.Transform4f().translate([-1, 0, 0])},
+        "b": {"type": "instance", "shapegroup": {"type": "ref", "id": "grp"},
+              "to_world": pn.Transform4f().translate([1, 0, 0])},
+    }
+    s = pn.load_dict(d)
+    params = pn.traverse(s)
+    for key in ["grp.first.bsdf.reflectance.value", "grp.second.vertex_positions",
+                "a.to_world", "b.to_world"]:
+        assert key in params, key
+    img = pn.render(s, spp=4)
+    # the two red balls, left and right of the (empty) centre
+    red = img[8, :, 0] - img[8, :, 2]
+    assert red[3:7].max() > 0.1 and red[9:13].max() > 0.1 and red[7:9].max() < 0.05
+    # moving an instance moves what is rendered
+    params["a.to_world"] = pn.Transform4f().translate([-1, 3, 0]).matrix
+    params.update()
+    moved = pn.render(s, spp=4)
+    assert (moved[8, 3:7, 0] - moved[8, 3:7, 2]).max() < 0.05
+    with pytest.raises(pn.SceneError, match=r"scene\['c'\].*no BSDF of its own"):
+        pn.load_dict({**d, "c": {"type": "instance", "shapegroup": {"type": "ref", "id": "grp"},
+                                 "bsdf": {"type": "diffuse"}}})

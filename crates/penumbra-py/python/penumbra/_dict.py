@@ -9,6 +9,12 @@ Conversion rules (Mitsuba 3's ``load_dict`` conventions):
   explicit ``'id'``;
 - ``{'type': 'rgb', 'value': v}`` -> ``<rgb>``; ``{'type': 'spectrum',
   'value': v}`` -> ``<spectrum>``; ``{'type': 'ref', 'id': name}`` -> ``<ref>``;
+- a spectrum plugin as a value (``{'type': 'blackbody', 'temperature':
+  3000}``; also ``uniform``, ``d65``, ``srgb``, ``regular``,
+  ``irregular``) -> ``<spectrum type=...>`` with its entries as
+  properties; a 3-sequence ``'color'`` is an ``<rgb>``, and ``values`` /
+  ``wavelengths`` are strings of numbers, as Mitsuba's ``load_dict``
+  takes them;
 - bool / int / float / str -> ``<boolean>`` / ``<integer>`` / ``<float>`` /
   ``<string>`` (numpy scalars too);
 - a 3-sequence of numbers -> ``<point>``;
@@ -51,6 +57,10 @@ for _cls, _names in {
 }.items():
     for _n in _names.split():
         PLUGIN_CLASS[_n] = _cls
+
+# Spectrum plugins: property values (``<spectrum type=...>``), never
+# objects of the scene.
+SPECTRUM_PLUGINS = ("uniform", "d65", "srgb", "blackbody", "regular", "irregular")
 
 INTEGRATORS = (
     "path",
@@ -179,11 +189,19 @@ class _Writer:
                 attrs += f" filename={quoteattr(os.fspath(d['filename']))}"
             self.emit(indent, f"<{t} {attrs}/>", path)
             return
+        if t in SPECTRUM_PLUGINS:
+            if top:
+                raise DictError(
+                    f"{_path_str(path)}: a '{t}' spectrum is a value, not an object of the "
+                    "scene; give it as a parameter of a plugin (e.g. an emitter's 'radiance')"
+                )
+            self.spectrum_plugin(indent, name, t, d, path)
+            return
         cls = PLUGIN_CLASS.get(t)
         if cls is None:
             raise DictError(
                 f"{_path_str(path)}: unknown plugin type '{t}' (known: "
-                f"{', '.join(sorted(PLUGIN_CLASS))})"
+                f"{', '.join(sorted(PLUGIN_CLASS))}; spectra: {', '.join(SPECTRUM_PLUGINS)})"
             )
         attrs = f"type={quoteattr(t)}"
         oid = d.get("id")
@@ -205,6 +223,29 @@ class _Writer:
         for k, v in body.items():
             self.value(indent + 1, k, v, path + (k,))
         self.emit(indent, f"</{cls}>", path)
+
+    def spectrum_plugin(self, indent, name, t, d, path):
+        """``<spectrum type=t name=name>`` with the dict's entries as
+        properties (the loader checks names and values)."""
+        body = {k: v for k, v in d.items() if k != "type"}
+        n = quoteattr(str(name))
+        if not body:
+            self.emit(indent, f"<spectrum type={quoteattr(t)} name={n}/>", path)
+            return
+        self.emit(indent, f"<spectrum type={quoteattr(t)} name={n}>", path)
+        for k, v in body.items():
+            where = path + (k,)
+            if k in ("values", "wavelengths") and not isinstance(v, str):
+                raise DictError(
+                    f"{_path_str(where)}: a string of numbers separated by commas, as Mitsuba's "
+                    f"load_dict takes it (e.g. '400, 500, 600'), got {type(v).__name__}"
+                )
+            if k == "color" and isinstance(v, (list, tuple, np.ndarray)) and np.shape(v) == (3,):
+                vals = ", ".join(_num(x) for x in np.asarray(v, dtype=float))
+                self.emit(indent + 1, f"<rgb name=\"color\" value=\"{vals}\"/>", where)
+                continue
+            self.value(indent + 1, k, v, where)
+        self.emit(indent, "</spectrum>", path)
 
     def bitmap_data(self, body, path):
         if "filename" in body:

@@ -74,8 +74,9 @@ impl BoundaryTerms {
 /// silhouettes of spheres and disks seen by a pinhole or orthographic
 /// camera are estimated), the outlines of cylinders seen by the camera
 /// (named when a moving key is a cylinder's or moves no other shape: the
-/// camera's), and visibility seen from the second and later vertices of a
-/// path.
+/// camera's), visibility seen from the second and later vertices of a
+/// path, and every edge of the shapes of shape groups seen through their
+/// instances (their silhouettes and the shadows they cast).
 ///
 /// Returns whether any of the keys moves a visibility edge (then the
 /// boundary terms apply).
@@ -121,6 +122,13 @@ pub(crate) fn warn_missing_boundary_terms(
     }
     if scene.integrator.traces_indirect_light() {
         missing.push("indirect visibility (edges seen after a bounce)");
+    }
+    if !scene.instances.is_empty() {
+        // the edge tables are per shape, in the group's space; instances
+        // would need them transformed per instance
+        missing.push(
+            "the edges of instanced shapes (shapegroup/instance: their silhouettes and shadows)",
+        );
     }
     if !missing.is_empty() {
         crate::warn(missing_boundary_terms_message(&moving, &missing));

@@ -427,6 +427,12 @@ fn segments<R: EdgeMotion>(
 ) -> Vec<Segment<R::Motion>> {
     let mut out = Vec::new();
     for (shape_index, shape) in scene.shapes.iter().enumerate() {
+        // a shape group's shapes are in the group's space, seen only
+        // through instances, whose edges are not sampled (named by
+        // `diff::warn_missing_boundary_terms`)
+        if scene.in_group(shape_index as u32) {
+            continue;
+        }
         let candidates: Vec<u32> = match shape {
             Shape::Mesh(mesh) => {
                 let positions = store.data(mesh.positions);

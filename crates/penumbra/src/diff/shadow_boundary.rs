@@ -126,7 +126,10 @@ impl CandidateEdges {
         let mut lengths = Vec::new();
         for (s, shape) in scene.shapes.iter().enumerate() {
             let Shape::Mesh(mesh) = shape else { continue };
-            if scene.shape_emitter(s as u32).is_some() {
+            // emitters cast no shadow edge here; a shape group's shapes
+            // are in the group's space, and the edges of instances are
+            // not sampled (named by `diff::warn_missing_boundary_terms`)
+            if scene.shape_emitter(s as u32).is_some() || scene.in_group(s as u32) {
                 continue;
             }
             for (i, e) in mesh.edges.edges.iter().enumerate() {

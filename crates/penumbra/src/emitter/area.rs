@@ -111,6 +111,7 @@ impl EmitterT for Area {
             shape: self.shape,
             prim: ps.prim,
             uv: ps.local,
+            instance: None,
         };
         let y = if shape.moves::<R>(store) {
             shape.point_at::<R>(store, &hit, ps.p)

@@ -24,13 +24,21 @@
 //! After vertex positions (or sphere/disk parameters) change, [`Accel::update`]
 //! refits the binary BVH kept from the build (same topology, new boxes) and
 //! re-derives the wide BVH from it, without a new PLOC build.
+//!
+//! Instancing is two-level ([`Accel::build_instanced`]): each shape group
+//! gets a structure of its own over its shapes, built once; the top-level
+//! structure holds the other shapes and one analytic primitive per
+//! instance (its box: the group's box transformed), whose intersection
+//! transforms the ray into the group's space and traverses the group's
+//! structure (`geometry::instance`).
 
+use crate::geometry::instance::{ray_to_group_space, Instance, ShapeGroup};
 use crate::geometry::shapes::cylinder::CylinderFrame;
 use crate::geometry::shapes::disk::DiskFrame;
 use crate::geometry::shapes::{Cylinder, Disk, Sphere};
 use crate::geometry::{Hit, Ray, Shape};
 use crate::params::ParamStore;
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
@@ -40,9 +48,19 @@ use std::mem::MaybeUninit;
 
 #[derive(Clone, Copy, Debug)]
 enum Analytic {
-    Sphere { c: Vec3, r: f32 },
+    Sphere {
+        c: Vec3,
+        r: f32,
+    },
     Disk(DiskFrame),
     Cylinder(CylinderFrame),
+    /// An instance: the world-to-group transform, the group (index into
+    /// `Accel::groups`) and the world box.
+    Instance {
+        to_local: Mat4,
+        group: u32,
+        bounds: Aabb,
+    },
 }
 
 impl Analytic {
@@ -59,6 +77,7 @@ impl Analytic {
                 let end = f.c + f.a2;
                 Aabb::new((f.c.min(end) - ext).into(), (f.c.max(end) + ext).into())
             }
+            Analytic::Instance { bounds, .. } => *bounds,
         }
     }
     #[inline]
@@ -67,6 +86,8 @@ impl Analytic {
             Analytic::Sphere { c, r } => Sphere::intersect_f32(*c, *r, o, d, tmin, tmax),
             Analytic::Disk(f) => Disk::intersect_f32(f, o, d, tmin, tmax),
             Analytic::Cylinder(f) => Cylinder::intersect_f32(f, o, d, tmin, tmax),
+            // traversed by `Accel::analytic_hit` (a hit on another shape)
+            Analytic::Instance { .. } => f32::INFINITY,
         }
     }
 }
@@ -427,7 +448,18 @@ impl Closest {
                 shape: p.shape[j],
                 prim: p.prim[j],
                 uv,
+                instance: None,
             });
+        }
+    }
+    /// Keeps `h` (an analytic primitive's, or one found through an
+    /// instance) if it is the closest yet.
+    #[inline(always)]
+    fn offer_hit(&mut self, h: Hit) {
+        if h.t < self.tmax {
+            self.tmax = h.t;
+            self.tmax_far = h.t * FAR_ROUND_UP;
+            self.best = Some(h);
         }
     }
 }
@@ -570,8 +602,16 @@ pub struct Accel {
     /// (shape, primitive) in build order.
     prims: Vec<[u32; 2]>,
     analytic: Vec<Analytic>,
-    /// Shape index → index in `analytic` (u32::MAX for meshes).
+    /// Shape index → index in `analytic` (u32::MAX for meshes); instance
+    /// `i` is shape index `n_shapes + i`.
     analytic_of_shape: Vec<u32>,
+    /// The shapes this structure holds (`None`: all): a shape group's, or
+    /// the shapes outside every group.
+    selection: Option<Vec<u32>>,
+    /// The structure of each shape group (two-level instancing).
+    groups: Vec<Accel>,
+    /// Number of shapes of the scene: instances come after them.
+    n_shapes: u32,
 }
 
 impl std::fmt::Debug for Accel {
@@ -581,16 +621,6 @@ impl std::fmt::Debug for Accel {
             .field("nodes", &self.nodes.len())
             .finish()
     }
-}
-
-fn collect_prims(shapes: &[Shape]) -> Vec<[u32; 2]> {
-    let mut prims = Vec::with_capacity(shapes.iter().map(|s| s.prim_count()).sum());
-    for (s, shape) in shapes.iter().enumerate() {
-        for p in 0..shape.prim_count() {
-            prims.push([s as u32, p as u32]);
-        }
-    }
-    prims
 }
 
 impl Accel {
@@ -604,12 +634,65 @@ impl Accel {
     /// [`Width::detect`]): for tests and benchmarks of the narrower
     /// kernel.
     pub fn build_with_width(shapes: &[Shape], store: &ParamStore, width: Width) -> Accel {
+        Accel::build_over(shapes, None, Vec::new(), &[], store, width)
+    }
+
+    /// The two-level structure of a scene with shape groups: one structure
+    /// per group over its shapes, and the top level over the shapes in no
+    /// group and one primitive per instance of a non-empty group.
+    /// `instances[i].group` indexes `groups`.
+    pub fn build_instanced(
+        shapes: &[Shape],
+        groups: &[ShapeGroup],
+        instances: &[Instance],
+        store: &ParamStore,
+    ) -> Accel {
+        if groups.is_empty() {
+            return Accel::build(shapes, store);
+        }
+        let width = Width::detect();
+        let sub = groups
+            .iter()
+            .map(|g| {
+                Accel::build_over(
+                    shapes,
+                    Some(g.members.clone()),
+                    Vec::new(),
+                    &[],
+                    store,
+                    width,
+                )
+            })
+            .collect();
+        let mut grouped = vec![false; shapes.len()];
+        for &m in groups.iter().flat_map(|g| &g.members) {
+            grouped[m as usize] = true;
+        }
+        let top = (0..shapes.len() as u32)
+            .filter(|&s| !grouped[s as usize])
+            .collect();
+        Accel::build_over(shapes, Some(top), sub, instances, store, width)
+    }
+
+    /// Builds over the shapes `selection` (all if `None`) and `instances`
+    /// of the structures `groups`.
+    fn build_over(
+        shapes: &[Shape],
+        selection: Option<Vec<u32>>,
+        groups: Vec<Accel>,
+        instances: &[Instance],
+        store: &ParamStore,
+        width: Width,
+    ) -> Accel {
         let mut a = Accel {
-            prims: collect_prims(shapes),
             width: width.min(Width::detect()),
+            selection,
+            groups,
+            n_shapes: shapes.len() as u32,
             ..Default::default()
         };
-        a.refresh_analytic(shapes, store);
+        a.prims = a.collect_prims(shapes, instances);
+        a.refresh_analytic(shapes, instances, store);
         let aabbs = a.aabbs(shapes, store);
         if aabbs.is_empty() {
             return a;
@@ -648,11 +731,27 @@ impl Accel {
     /// boxes of the existing tree (rebuilds only if the primitive set
     /// changed).
     pub fn update(&mut self, shapes: &[Shape], store: &ParamStore) {
-        if collect_prims(shapes) != self.prims || self.bvh2.nodes.is_empty() {
-            *self = Accel::build(shapes, store);
+        self.update_instanced(shapes, &[], store);
+    }
+
+    /// [`Accel::update`] of a structure from [`Accel::build_instanced`]:
+    /// refits the groups' structures, then the top level with the
+    /// instances' current transforms.
+    pub fn update_instanced(
+        &mut self,
+        shapes: &[Shape],
+        instances: &[Instance],
+        store: &ParamStore,
+    ) {
+        for g in &mut self.groups {
+            g.update_instanced(shapes, &[], store);
+        }
+        if self.collect_prims(shapes, instances) != self.prims || self.bvh2.nodes.is_empty() {
+            let (selection, groups) = (self.selection.take(), std::mem::take(&mut self.groups));
+            *self = Accel::build_over(shapes, selection, groups, instances, store, self.width);
             return;
         }
-        self.refresh_analytic(shapes, store);
+        self.refresh_analytic(shapes, instances, store);
         let aabbs = self.aabbs(shapes, store);
         let idx = &self.bvh2.primitive_indices;
         for node in self.bvh2.nodes.iter_mut() {
@@ -669,7 +768,28 @@ impl Accel {
         self.finish(shapes, store);
     }
 
-    fn refresh_analytic(&mut self, shapes: &[Shape], store: &ParamStore) {
+    /// Primitives in build order: those of the selected shapes, then one
+    /// per instance of a non-empty group (shape index `n_shapes + i`).
+    fn collect_prims(&self, shapes: &[Shape], instances: &[Instance]) -> Vec<[u32; 2]> {
+        let mut prims = Vec::new();
+        let mut add = |s: u32| {
+            for p in 0..shapes[s as usize].prim_count() {
+                prims.push([s, p as u32]);
+            }
+        };
+        match &self.selection {
+            Some(sel) => sel.iter().for_each(|&s| add(s)),
+            None => (0..shapes.len() as u32).for_each(add),
+        }
+        for (i, inst) in instances.iter().enumerate() {
+            if !self.groups[inst.group as usize].prims.is_empty() {
+                prims.push([self.n_shapes + i as u32, 0]);
+            }
+        }
+        prims
+    }
+
+    fn refresh_analytic(&mut self, shapes: &[Shape], instances: &[Instance], store: &ParamStore) {
         self.analytic.clear();
         self.analytic_of_shape.clear();
         for s in shapes {
@@ -690,13 +810,29 @@ impl Accel {
                 None => self.analytic_of_shape.push(u32::MAX),
             }
         }
+        for inst in instances {
+            let bounds = match self.groups[inst.group as usize].bvh2.nodes.first() {
+                Some(root) => {
+                    let b = root.aabb();
+                    let (lo, hi) = inst.bounds(b.min.into(), b.max.into());
+                    Aabb::new(lo.into(), hi.into())
+                }
+                None => Aabb::empty(),
+            };
+            self.analytic_of_shape.push(self.analytic.len() as u32);
+            self.analytic.push(Analytic::Instance {
+                to_local: inst.transform().inv,
+                group: inst.group,
+                bounds,
+            });
+        }
     }
 
     fn aabbs(&self, shapes: &[Shape], store: &ParamStore) -> Vec<Aabb> {
         self.prims
             .iter()
-            .map(|&[s, p]| match &shapes[s as usize] {
-                Shape::Mesh(m) => {
+            .map(|&[s, p]| match shapes.get(s as usize) {
+                Some(Shape::Mesh(m)) => {
                     let [p0, p1, p2] = m.triangle(store, p as usize);
                     Aabb::new(p0.min(p1).min(p2).into(), p0.max(p1).max(p2).into())
                 }
@@ -738,11 +874,11 @@ impl Accel {
                     }
                     let [s, p] = self.prims[id as usize];
                     (shape[k], prim[k]) = (s, p);
-                    match &shapes[s as usize] {
+                    match shapes.get(s as usize) {
                         // a zero-area face keeps zero edges, like an
                         // unused lane: never hit (see geometry::mesh)
-                        Shape::Mesh(m) if m.face_is_degenerate(p as usize) => {}
-                        Shape::Mesh(m) => {
+                        Some(Shape::Mesh(m)) if m.face_is_degenerate(p as usize) => {}
+                        Some(Shape::Mesh(m)) => {
                             let [p0, p1, p2] = m.triangle(store, p as usize);
                             let (e1, e2) = (p0 - p1, p2 - p0);
                             lanes[k] = [p0, e1, e2, e1.cross(e2)];
@@ -775,16 +911,59 @@ impl Accel {
             .collect();
     }
 
-    /// Number of primitives (triangles and analytic shapes).
+    /// Number of primitives (triangles, analytic shapes and instances) of
+    /// the top level.
     pub fn prim_count(&self) -> usize {
         self.prims.len()
     }
 
-    /// The analytic primitive of shape `shape`.
+    /// Number of primitives of each shape group's structure (held once,
+    /// whatever the number of instances).
+    pub fn group_prim_counts(&self) -> Vec<usize> {
+        self.groups.iter().map(Accel::prim_count).collect()
+    }
+
+    /// The hit on `(tmin, tmax)` of the analytic primitive of shape
+    /// `shape` (lane primitive `prim`): an analytic shape's, or the
+    /// closest hit in an instance's group (its `t` a world distance).
     #[inline(never)]
-    fn analytic_hit(&self, shape: u32, ray: &Ray, tmin: f32, tmax: f32) -> f32 {
+    fn analytic_hit(&self, shape: u32, prim: u32, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let a = &self.analytic[self.analytic_of_shape[shape as usize] as usize];
-        a.intersect(ray.o, ray.d, tmin, tmax)
+        if let Analytic::Instance {
+            to_local, group, ..
+        } = a
+        {
+            let (local, len) = ray_to_group_space(to_local, &Ray { tmin, tmax, ..*ray });
+            let h = self.groups[*group as usize].intersect(&local)?;
+            return Some(Hit {
+                t: h.t / len,
+                instance: Some(shape - self.n_shapes),
+                ..h
+            });
+        }
+        let t = a.intersect(ray.o, ray.d, tmin, tmax);
+        (t < tmax).then_some(Hit {
+            t,
+            shape,
+            prim,
+            uv: Vec2::ZERO,
+            instance: None,
+        })
+    }
+
+    /// Whether the analytic primitive of shape `shape` blocks `(tmin,
+    /// tmax)`.
+    #[inline(never)]
+    fn analytic_occludes(&self, shape: u32, ray: &Ray, tmin: f32, tmax: f32) -> bool {
+        let a = &self.analytic[self.analytic_of_shape[shape as usize] as usize];
+        if let Analytic::Instance {
+            to_local, group, ..
+        } = a
+        {
+            let (local, _) = ray_to_group_space(to_local, &Ray { tmin, tmax, ..*ray });
+            return self.groups[*group as usize].occluded(&local);
+        }
+        a.intersect(ray.o, ray.d, tmin, tmax) < tmax
     }
 
     /// Leaf packet `i`: the first of a leaf (its child slot without the
@@ -905,8 +1084,9 @@ impl Accel {
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let t = self.analytic_hit(p.shape[j], ray, tmin, c.tmax);
-                    c.offer(t, p, j, Vec2::ZERO);
+                    if let Some(h) = self.analytic_hit(p.shape[j], p.prim[j], ray, tmin, c.tmax) {
+                        c.offer_hit(h);
+                    }
                 }
                 if !p.more {
                     break;
@@ -977,7 +1157,7 @@ impl Accel {
                 while m != 0 {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if self.analytic_hit(p.shape[j], ray, tmin, tmax) < tmax {
+                    if self.analytic_occludes(p.shape[j], ray, tmin, tmax) {
                         return true;
                     }
                 }

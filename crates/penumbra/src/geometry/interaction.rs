@@ -82,6 +82,10 @@ pub struct Hit {
     pub shape: u32,
     pub prim: u32,
     pub uv: Vec2,
+    /// The instance (index into the scene's instances) through which a
+    /// shape of a shape group was hit; `shape` is then the group's shape
+    /// and `t` the world distance (see `geometry::instance`).
+    pub instance: Option<u32>,
 }
 
 /// A point on a surface with its local differential geometry.

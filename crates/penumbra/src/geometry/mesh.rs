@@ -131,9 +131,11 @@ pub struct Mesh {
     /// follow the positions (empty without vertex normals).
     vertex_faces: VertexFaces,
     /// Unit geometric normal per face (flipped with `flip_normals`; zero
-    /// for a degenerate face), derived from the positions with the area
-    /// table (f32, not differentiated: used by position sampling).
+    /// for a degenerate face) and twice its area, derived from the
+    /// positions with the area table (f32, not differentiated: used by
+    /// position sampling and f32 hits).
     face_n: Vec<Vec3>,
+    face_area2: Vec<f32>,
     /// The welded edges and their kinds, refreshed with the areas (boxed:
     /// the shape enum stays small).
     pub edges: Box<EdgeTable>,
@@ -358,6 +360,7 @@ impl Mesh {
             area_distr: DiscreteDistribution::default(),
             area: 0.0,
             face_n: Vec::new(),
+            face_area2: Vec::new(),
             edges: Box::default(),
         };
         mesh.update_areas(store)?;
@@ -413,6 +416,7 @@ impl Mesh {
                 }
             })
             .unzip();
+        self.face_area2 = areas.iter().map(|a| 2.0 * a).collect();
         self.face_n = normals;
         self.area_distr = DiscreteDistribution::new(&areas).ok_or_else(|| {
             Error::Invalid(format!(
@@ -637,10 +641,12 @@ impl Mesh {
             (cross / area_scale, area_scale)
         } else {
             // the unit normal kept per face (flipped with `flip_normals`,
-            // undone here as below it is flipped with the shading normal);
-            // nothing moves in f32, so the area scale is never used
-            let n = self.face_n[hit.prim as usize];
-            (V3::cst(if self.flip_normals { -n } else { n }), R::cst(1.0))
+            // undone here as below it is flipped with the shading normal)
+            // and twice the face's area, the barycentric area scale
+            let f = hit.prim as usize;
+            let n = self.face_n[f];
+            let n = if self.flip_normals { -n } else { n };
+            (V3::cst(n), R::cst(self.face_area2[f]))
         };
         // Mitsuba's mesh.cpp: the tangents of the normal's coordinate
         // system unless the triangle's texture coordinates give ∂p/∂u and
@@ -1194,6 +1200,7 @@ mod tests {
             shape: 0,
             prim: 3,
             uv: Vec2::ZERO,
+            instance: None,
         };
         // the hit is re-solved from the vertices in R (a Dual without
         // tangents for the primal values: the f32 re-evaluation takes the
@@ -1278,6 +1285,7 @@ mod tests {
             shape: 0,
             prim: 0,
             uv: Vec2::new(0.3, 0.2),
+            instance: None,
         };
         let si = m.surface_interaction::<f32>(&s2.primal(), &DiffRay::cst(&ray), &hit);
         assert!((si.t - 5.0).abs() < 1e-5);

@@ -6,6 +6,7 @@
 
 pub mod accel;
 pub mod edges;
+pub mod instance;
 mod interaction;
 pub mod mesh;
 pub mod obj;
@@ -15,6 +16,7 @@ pub mod shape;
 pub mod shapes;
 
 pub use accel::Accel;
+pub use instance::{Instance, ShapeGroup};
 pub use interaction::{DiffRay, Hit, PositionSample, Ray, SurfaceInteraction};
 pub use mesh::{Mesh, MeshData, MeshOptions, SkippedFaces};
 pub use shape::{Shape, ShapeT, SHAPE_PLUGINS};

@@ -4,6 +4,12 @@
 //!
 //! Like Mitsuba 3's `obj` plugin (parameter `flip_tex_coords`, default
 //! true), the vertical texture coordinate is flipped on load: `v = 1 - v`.
+//!
+//! Vertex colours (the common `v x y z r g b` extension) load and are not
+//! used, as in Mitsuba 3.9.1, whose `obj` plugin reads only positions,
+//! normals and texture coordinates: an OBJ mesh has no `vertex_color`
+//! attribute there (a `mesh_attribute` texture naming it fails to render),
+//! nor here (naming it is an error at load).
 
 use crate::error::{Error, Result};
 use crate::geometry::mesh::MeshData;
@@ -96,6 +102,25 @@ mod tests {
         let d = load_obj(&p, false).unwrap();
         assert!((d.texcoords.unwrap()[i] - Vec2::new(0.0, 0.25)).length() < 1e-6);
         assert!(load_obj(&dir.join("none.obj"), true).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// `v x y z r g b` lines (vertex colours) load as positions; the
+    /// colours are not kept, as Mitsuba 3.9.1 keeps none.
+    #[test]
+    fn vertex_colours_load_and_are_not_kept() {
+        let dir = std::env::temp_dir().join(format!("penumbra-objc-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("coloured.obj");
+        std::fs::write(
+            &p,
+            "v -1 -1 0 1 0 0\nv 1 -1 0 0 1 0\nv 1 1 0 0 0 1\nv -1 1 0 1 1 0\nf 1 2 3\nf 1 3 4\n",
+        )
+        .unwrap();
+        let d = load_obj(&p, true).unwrap();
+        assert_eq!(d.faces.len(), 2);
+        assert_eq!(d.positions[2], Vec3::new(1.0, 1.0, 0.0));
+        assert!(d.attributes.is_empty());
         std::fs::remove_dir_all(&dir).ok();
     }
 }

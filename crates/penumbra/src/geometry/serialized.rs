@@ -19,9 +19,16 @@
 //! (u64 in version 4, u32 in version 3), then the number of shapes (u32).
 //! The first shape is at offset 0; the others are found through the
 //! dictionary (`shape_index`).
+//!
+//! Vertex colours become the mesh attribute `vertex_color` (3 channels,
+//! values as stored), which the `mesh_attribute` texture reads, as PLY
+//! colours are read. Mitsuba 3.9.1 reads past them instead: its
+//! `serialized` plugin has no `vertex_color` attribute, and a
+//! `mesh_attribute` texture naming it fails when rendered ("Invalid
+//! attribute requested vertex_color"). Penumbra renders such files.
 
 use crate::error::{Error, Result};
-use crate::geometry::mesh::MeshData;
+use crate::geometry::mesh::{MeshAttribute, MeshData};
 use flate2::read::ZlibDecoder;
 use glam::{Vec2, Vec3};
 use std::io::Read;
@@ -44,8 +51,6 @@ pub struct SerializedShape {
     pub data: MeshData,
     /// The name stored in the file (version 4; empty in version 3).
     pub name: String,
-    /// The file has vertex colours (which Penumbra does not use).
-    pub has_colors: bool,
 }
 
 /// Reads shape `shape_index` of a `.serialized` file.
@@ -112,8 +117,14 @@ pub fn read_serialized(
     } else {
         None
     };
+    let mut attributes = Vec::new();
     if flags & HAS_COLORS != 0 {
-        z.reals(nv * 3, double, "vertex colors")?;
+        attributes.push(MeshAttribute {
+            name: "vertex_color".into(),
+            channels: 3,
+            per_face: false,
+            data: z.reals(nv * 3, double, "vertex colors")?,
+        });
     }
     let mut faces = Vec::with_capacity(nf.min(1 << 20));
     for _ in 0..nf {
@@ -130,10 +141,9 @@ pub fn read_serialized(
             normals: normals.map(vec3s),
             texcoords: texcoords.map(|t| t.chunks_exact(2).map(Vec2::from_slice).collect()),
             faces,
-            attributes: Vec::new(),
+            attributes,
         },
         name: String::from_utf8_lossy(&name).into_owned(),
-        has_colors: flags & HAS_COLORS != 0,
     })
 }
 
@@ -278,7 +288,12 @@ mod tests {
                 .for_each(|p| [p[0], p[1]].iter().for_each(|&c| reals(c)));
         }
         if flags & HAS_COLORS != 0 {
-            (0..positions.len() * 3).for_each(|_| reals(0.5));
+            // vertex i has colour (0.1 i, 0.2, 0.5 + 0.1 i)
+            (0..positions.len()).for_each(|i| {
+                [0.1 * i as f64, 0.2, 0.5 + 0.1 * i as f64]
+                    .iter()
+                    .for_each(|&c| reals(c))
+            });
         }
         faces
             .iter()
@@ -324,6 +339,7 @@ mod tests {
                         "quad",
                     ),
                     shape(version, HAS_COLORS, "coloured"),
+                    shape(version, HAS_COLORS | DOUBLE_PRECISION, "coloured64"),
                 ],
             );
             let tri = read_serialized(&f, 0).unwrap();
@@ -335,9 +351,24 @@ mod tests {
             assert_eq!(quad.data.faces, vec![[0, 1, 2], [0, 2, 3]]);
             assert_eq!(quad.data.normals.unwrap()[3], Vec3::Z);
             assert_eq!(quad.data.texcoords.unwrap()[2], Vec2::new(1.0, 1.0));
-            let coloured = read_serialized(&f, 2).unwrap();
-            assert!(coloured.has_colors && !quad.has_colors);
-            assert_eq!(coloured.data.faces, vec![[0, 1, 2]]);
+            assert!(quad.data.attributes.is_empty());
+            for index in [2, 3] {
+                let coloured = read_serialized(&f, index).unwrap();
+                assert_eq!(coloured.data.faces, vec![[0, 1, 2]]);
+                let [c] = coloured.data.attributes.as_slice() else {
+                    panic!("one attribute: {:?}", coloured.data.attributes)
+                };
+                assert_eq!(
+                    (c.name.as_str(), c.channels, c.per_face),
+                    ("vertex_color", 3, false)
+                );
+                let want: Vec<f32> = (0..3)
+                    .flat_map(|i| [0.1 * i as f32, 0.2, 0.5 + 0.1 * i as f32])
+                    .collect();
+                for (a, b) in c.data.iter().zip(&want) {
+                    assert!((a - b).abs() < 1e-7, "{:?} vs {want:?}", c.data);
+                }
+            }
         }
     }
 

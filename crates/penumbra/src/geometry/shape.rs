@@ -59,6 +59,10 @@ pub const SHAPE_PLUGINS: [&str; 8] = [
 ];
 
 /// All shape plugins.
+// A scene holds a few shapes, once, in one array that every hit indexes:
+// the unused bytes of the small variants cost nothing, a box per mesh would
+// cost an indirection on every hit.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Shape {
     /// `ply`, `obj`, `serialized`, `rectangle`, `cube`.

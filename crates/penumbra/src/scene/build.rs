@@ -7,7 +7,7 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{Emitter, EmitterT};
 use crate::error::Result;
 use crate::geometry::accel::Accel;
-use crate::geometry::Shape;
+use crate::geometry::{Instance, Shape, ShapeGroup};
 use crate::integrator::{Integrator, PathIntegrator};
 use crate::math::DiscreteDistribution;
 use crate::medium::Medium;
@@ -26,6 +26,9 @@ struct Builder {
     bsdf_of_node: HashMap<*const Node, u32>,
     shapes: Vec<Shape>,
     shape_info: Vec<ShapeInfo>,
+    groups: Vec<ShapeGroup>,
+    group_of_node: HashMap<*const Node, u32>,
+    instances: Vec<Instance>,
     emitters: Vec<Emitter>,
     /// Mitsuba's `sampling_weight` of each emitter.
     emitter_weights: Vec<f32>,
@@ -140,7 +143,148 @@ impl Builder {
         Ok(i)
     }
 
+    /// A shape declared at the top level of the scene: a shape group, an
+    /// instance, or a shape rendered where it is.
     fn shape(&mut self, node: &Rc<Node>) -> Result<()> {
+        match node.plugin.as_str() {
+            "shapegroup" => self.group(node).map(|_| ()),
+            "instance" => self.instance(node),
+            _ => self.plain_shape(node, None).map(|_| ()),
+        }
+    }
+
+    /// The shape group built from `node` (once per node: every instance
+    /// referencing it shares it). Refuses what Mitsuba 3 refuses in a
+    /// group: other groups, instances, emitters, objects other than shapes.
+    fn group(&mut self, node: &Rc<Node>) -> Result<u32> {
+        if let Some(&g) = self.group_of_node.get(&Rc::as_ptr(node)) {
+            return Ok(g);
+        }
+        let g = self.groups.len() as u32;
+        let mut members = Vec::new();
+        for p in &node.props {
+            let Value::Node(child) = &p.value else {
+                continue;
+            };
+            if child.class != Class::Shape {
+                return Err(node.prop_error(
+                    p,
+                    format!(
+                        "a shape group holds only shapes, found a <{}>; put it inside one of \
+                         the group's shapes (or give each shape a <ref> to it)",
+                        child.class.tag()
+                    ),
+                ));
+            }
+            match child.plugin.as_str() {
+                "shapegroup" => {
+                    return Err(node.prop_error(
+                        p,
+                        "shape groups cannot be nested (nor can they in Mitsuba 3); declare \
+                         the inner group at the top level and instance its shapes' group there",
+                    ))
+                }
+                "instance" => {
+                    return Err(node.prop_error(
+                        p,
+                        "instances cannot be nested in a shape group (nor can they in Mitsuba \
+                         3); place the instance at the top level of the scene",
+                    ))
+                }
+                _ => {}
+            }
+            if let Some(e) = child
+                .props
+                .iter()
+                .find(|q| matches!(&q.value, Value::Node(n) if n.class == Class::Emitter))
+            {
+                return Err(child.prop_error(
+                    e,
+                    "emitters cannot be instanced (nor can they in Mitsuba 3): an area light \
+                     cannot be a shape of a shape group; declare the emitting shape outside \
+                     the group",
+                ));
+            }
+            members.push(self.plain_shape(child, Some(g))?);
+            // the property named the member; it is used
+            node.prop(&p.name);
+        }
+        if node.prop("to_world").is_some() {
+            crate::warn(format!(
+                "{}: {node}: 'to_world' of a shape group is ignored (as by Mitsuba 3); place \
+                 the group with each instance's to_world",
+                node.loc
+            ));
+        }
+        node.check_all_used()?;
+        self.groups.push(ShapeGroup {
+            key: node.key.clone(),
+            members,
+        });
+        self.group_of_node.insert(Rc::as_ptr(node), g);
+        Ok(g)
+    }
+
+    /// An instance: the shape group it references, placed by its
+    /// `to_world`. It has no BSDF, emitter or media of its own, as in
+    /// Mitsuba 3.
+    fn instance(&mut self, node: &Rc<Node>) -> Result<()> {
+        let mut group = None;
+        for p in &node.props {
+            let Value::Node(child) = &p.value else {
+                continue;
+            };
+            let refusal = match child.class {
+                Class::Shape if child.plugin == "shapegroup" => {
+                    if group.is_some() {
+                        return Err(node.prop_error(
+                            p,
+                            "an instance places one shape group (as in Mitsuba 3); remove the \
+                             other references or add an instance for each group",
+                        ));
+                    }
+                    group = Some(child.clone());
+                    node.prop(&p.name);
+                    continue;
+                }
+                Class::Shape => format!(
+                    "an instance references a shape group, found {child}; put the shape in a \
+                     <shape type=\"shapegroup\" id=\"…\"> and reference that"
+                ),
+                Class::Bsdf => "an instance has no BSDF of its own (as in Mitsuba 3): its \
+                                materials are those of its group's shapes; give them the <bsdf>"
+                    .into(),
+                Class::Emitter => "emitters cannot be instanced (nor can they in Mitsuba 3); \
+                                   declare the emitting shape outside any group"
+                    .into(),
+                Class::Medium => "an instance has no media of its own (Mitsuba 3 refuses \
+                                  them): give its group's shapes their interior and exterior"
+                    .into(),
+                _ => format!(
+                    "an instance holds only a reference to a shape group, found a <{}>",
+                    child.class.tag()
+                ),
+            };
+            return Err(node.prop_error(p, refusal));
+        }
+        let Some(group_node) = group else {
+            return Err(node.error(
+                "an instance needs a shape group: add <ref id=\"…\"/> naming a <shape \
+                 type=\"shapegroup\" id=\"…\"> (as in Mitsuba 3)",
+            ));
+        };
+        let group = self.group(&group_node)?;
+        let to_world = node.transform("to_world")?;
+        let inst = Instance::new(&node.key, group, &to_world, &mut self.ctx.store)
+            .map_err(|e| node.error(e))?;
+        node.check_all_used()?;
+        self.instances.push(inst);
+        Ok(())
+    }
+
+    /// A shape (not a group nor an instance), in shape group `group` if
+    /// any; returns its index.
+    fn plain_shape(&mut self, node: &Rc<Node>, group: Option<u32>) -> Result<u32> {
         let shape = Shape::from_node(node, &mut self.ctx)?;
         let index = self.shapes.len() as u32;
         let bsdf = match node.child("bsdf")? {
@@ -174,8 +318,9 @@ impl Builder {
             emitter,
             interior,
             exterior,
+            group,
         });
-        Ok(())
+        Ok(index)
     }
 }
 
@@ -193,6 +338,9 @@ impl Scene {
             bsdf_of_node: HashMap::new(),
             shapes: Vec::new(),
             shape_info: Vec::new(),
+            groups: Vec::new(),
+            group_of_node: HashMap::new(),
+            instances: Vec::new(),
             emitters: Vec::new(),
             emitter_weights: Vec::new(),
             environment: None,
@@ -252,7 +400,7 @@ impl Scene {
             );
         }
         let store = b.ctx.store;
-        let accel = Accel::build(&b.shapes, &store);
+        let accel = Accel::build_instanced(&b.shapes, &b.groups, &b.instances, &store);
         let (center, radius) = accel.bounding_sphere();
         for e in &mut b.emitters {
             e.set_scene_bounds(center, radius);
@@ -271,6 +419,8 @@ impl Scene {
             params: store,
             shapes: b.shapes,
             shape_info: b.shape_info,
+            groups: b.groups,
+            instances: b.instances,
             bsdfs: b.bsdfs,
             emitters: b.emitters,
             environment: b.environment,

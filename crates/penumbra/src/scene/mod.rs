@@ -65,7 +65,7 @@ use crate::ad::Real;
 use crate::bsdf::Bsdf;
 use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
-use crate::geometry::{DiffRay, Hit, Ray, Shape, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, Instance, Ray, Shape, ShapeGroup, ShapeT, SurfaceInteraction};
 use crate::integrator::Integrator;
 use crate::math::{DiscreteDistribution, V3};
 use crate::medium::Medium;
@@ -95,14 +95,23 @@ pub struct ShapeInfo {
     /// [`Scene::media`]); outside is the side the normal points to.
     pub interior: Option<u32>,
     pub exterior: Option<u32>,
+    /// The shape group the shape belongs to (index into
+    /// [`Scene::groups`]): it is then rendered only through instances, and
+    /// its geometry is in the group's space.
+    pub group: Option<u32>,
 }
 
 /// A loaded scene: parameters, plugins, and the acceleration structure.
 #[derive(Clone, Debug)]
 pub struct Scene {
     pub params: ParamStore,
+    /// Every shape, those of shape groups included.
     pub shapes: Vec<Shape>,
     pub shape_info: Vec<ShapeInfo>,
+    /// The shape groups (`shapegroup`), rendered through [`Scene::instances`].
+    pub groups: Vec<ShapeGroup>,
+    /// The instances of shape groups (`instance`).
+    pub instances: Vec<Instance>,
     pub bsdfs: Vec<Bsdf>,
     pub emitters: Vec<Emitter>,
     /// How next-event estimation picks an emitter (by `sampling_weight`).
@@ -194,9 +203,25 @@ impl Scene {
         if R::DIFFERENTIABLE && ray.is_const() && !shape.reads_tracked::<R>(store) {
             // nothing the hit depends on carries a derivative
             let ray = DiffRay::<f32>::cst(&ray.val());
-            return SurfaceInteraction::cst(&shape.surface_interaction(store, &ray, hit));
+            return SurfaceInteraction::cst(&self.hit_interaction(shape, store, &ray, hit));
         }
-        shape.surface_interaction(store, ray, hit)
+        self.hit_interaction(shape, store, ray, hit)
+    }
+
+    /// [`Scene::surface_interaction`] of a hit of `shape`, directly or
+    /// through the instance that was hit.
+    #[inline(always)]
+    fn hit_interaction<R: Real>(
+        &self,
+        shape: &Shape,
+        store: &ParamView,
+        ray: &DiffRay<R>,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
+        match hit.instance {
+            None => shape.surface_interaction(store, ray, hit),
+            Some(i) => self.instances[i as usize].surface_interaction(shape, store, ray, hit),
+        }
     }
 
     /// Re-evaluates a hit in `R` as a point that moves with its shape (see
@@ -210,9 +235,31 @@ impl Scene {
     ) -> SurfaceInteraction<R> {
         let shape = &self.shapes[hit.shape as usize];
         if R::DIFFERENTIABLE && !shape.reads_tracked::<R>(store) {
-            return SurfaceInteraction::cst(&shape.point_at(store, hit, p));
+            return SurfaceInteraction::cst(&self.point_interaction(shape, store, hit, p));
         }
-        shape.point_at(store, hit, p)
+        self.point_interaction(shape, store, hit, p)
+    }
+
+    /// [`Scene::point_at`] of `shape`, directly or through its instance.
+    #[inline(always)]
+    fn point_interaction<R: Real>(
+        &self,
+        shape: &Shape,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
+        match hit.instance {
+            None => shape.point_at(store, hit, p),
+            Some(i) => self.instances[i as usize].point_at(shape, store, hit, p),
+        }
+    }
+
+    /// Whether shape `shape` belongs to a shape group (it is then seen only
+    /// through instances, and its geometry is in the group's space).
+    #[inline]
+    pub fn in_group(&self, shape: u32) -> bool {
+        self.shape_info[shape as usize].group.is_some()
     }
 
     #[inline]
@@ -289,6 +336,11 @@ impl Scene {
         for s in &mut self.shapes {
             s.parameters_changed(&mut self.params, &changed)?;
         }
+        for inst in &mut self.instances {
+            if changed.contains(&inst.to_world) {
+                inst.parameters_changed(&self.params)?;
+            }
+        }
         // normals recomputed above are consequences, not new updates
         self.params.take_dirty();
         // only surfaces that moved need the acceleration structure refit
@@ -297,8 +349,10 @@ impl Scene {
             .shapes
             .iter()
             .any(|s| s.geometry_params().iter().any(|id| changed.contains(id)))
+            || self.instances.iter().any(|i| changed.contains(&i.to_world))
         {
-            self.accel.update(&self.shapes, &self.params);
+            self.accel
+                .update_instanced(&self.shapes, &self.instances, &self.params);
         }
         for e in &mut self.emitters {
             e.parameters_changed(&self.params, &changed);

@@ -227,6 +227,7 @@ mod tests {
             shape: 0,
             prim,
             uv: Vec2::new(b1, b2),
+            instance: None,
         }
     }
 

@@ -519,6 +519,7 @@ mod tests {
             shape: 0,
             prim: ps.prim,
             uv: ps.local,
+            instance: None,
         }
     }
 

@@ -1,7 +1,9 @@
 //! The `serialized` shape plugin: one triangle mesh of a Mitsuba
 //! `.serialized` file (format in [`crate::geometry::serialized`]).
 //! Parameters: `filename`, `shape_index` (0: which shape of the file),
-//! `face_normals` (false), `flip_normals` (false), `to_world`.
+//! `face_normals` (false), `flip_normals` (false), `to_world`. Vertex
+//! colours of the file are the mesh attribute `vertex_color` (for the
+//! `mesh_attribute` texture), which Mitsuba 3.9.1 does not read.
 
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
@@ -16,12 +18,6 @@ pub fn load(node: &Node, ctx: &mut LoadContext) -> Result<Mesh> {
     let to_world = node.transform("to_world")?;
     let shape = load_serialized(&path, index as usize).map_err(|e| node.error(e))?;
     let source = format!("{}@{index}", path.display());
-    if shape.has_colors {
-        crate::warn::warn(format!(
-            "{}: {source}: the file's vertex colors are not used (Penumbra has no mesh attributes)",
-            node.loc
-        ));
-    }
     Mesh::new(
         "serialized",
         &node.key,

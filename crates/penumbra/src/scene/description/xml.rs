@@ -606,6 +606,7 @@ impl<'a> Builder<'a> {
             *total.entry(t).or_default() += 1;
         }
         let mut seen: HashMap<&str, usize> = HashMap::new();
+        let mut unnamed_members = 0;
         let mut auto_name = |t: &'static str| -> String {
             if total[t] > 1 {
                 let n = seen.entry(t).or_default();
@@ -639,7 +640,25 @@ impl<'a> Builder<'a> {
                         None => auto_name(tag.expect("unnamed plugin has a tag")),
                     }
                 };
-                let key = child_key(&node.key, &name, c.attr("id"));
+                let key = if node.class == Class::Shape && node.plugin == "shapegroup" {
+                    // a shape group's shapes are keyed under the group as
+                    // Mitsuba's traverse() keys them: by id, else `shape`,
+                    // `shape_1`, `shape_2`, … in file order (and by name,
+                    // which Python dicts give as Mitsuba's load_dict does)
+                    let member = match (c.attr("id"), c.attr("name")) {
+                        (Some(id), _) | (None, Some(id)) => id.to_string(),
+                        (None, None) => {
+                            unnamed_members += 1;
+                            match unnamed_members {
+                                1 => "shape".to_string(),
+                                k => format!("shape_{}", k - 1),
+                            }
+                        }
+                    };
+                    format!("{}.{member}", node.key)
+                } else {
+                    child_key(&node.key, &name, c.attr("id"))
+                };
                 let child = self.object(c, class, key)?;
                 let mut prop = Prop::new(name, Value::Node(child), c.loc.clone());
                 prop.unnamed = c.attr("name").is_none();
