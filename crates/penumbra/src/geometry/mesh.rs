@@ -657,9 +657,7 @@ impl Mesh {
         };
         let (uv, (dp_du, dp_dv)) = match self.texcoords {
             Some(tid) => {
-                let read2 = |i: usize| {
-                    V2::new(store.read::<R>(tid, 2 * i), store.read::<R>(tid, 2 * i + 1))
-                };
+                let read2 = |i: usize| store.read2::<R>(tid, i);
                 let (t0, t1, t2) = (read2(i0), read2(i1), read2(i2));
                 let uv = V2::new(
                     t0.x * b0 + t1.x * b1 + t2.x * b2,

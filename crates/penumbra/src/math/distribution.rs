@@ -75,7 +75,13 @@ impl DiscreteDistribution {
         }
         let u64 = u as f64;
         // first index i with cdf[i+1] > u, among entries of non-zero mass
-        let mut i = self.cdf.partition_point(|&c| c <= u64).saturating_sub(1);
+        let mut i = if n <= 16 {
+            // a few entries (emitters, a rectangle's triangles): a scan
+            // without branches to mispredict beats the binary search
+            self.cdf[1..n].iter().filter(|&&c| c <= u64).count()
+        } else {
+            self.cdf.partition_point(|&c| c <= u64).saturating_sub(1)
+        };
         i = i.min(n - 1);
         while i + 1 < n && self.cdf[i + 1] <= u64 {
             i += 1;

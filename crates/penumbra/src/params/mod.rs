@@ -10,7 +10,7 @@
 use crate::ad::Real;
 use crate::error::Error;
 use crate::geometry::mesh::AttributeParam;
-use crate::math::V3;
+use crate::math::{V2, V3};
 use std::collections::HashMap;
 use std::fmt;
 
@@ -480,11 +480,26 @@ impl<'a> ParamView<'a> {
     /// Elements `3i, 3i+1, 3i+2` as a vector (RGB values, positions).
     #[inline(always)]
     pub fn read3<R: Real>(&self, id: ParamId, i: usize) -> V3<R> {
+        if !R::DIFFERENTIABLE {
+            // one look-up of the parameter and one bounds check, not three
+            let v = &self.store.data(id)[3 * i..3 * i + 3];
+            return V3::new(R::cst(v[0]), R::cst(v[1]), R::cst(v[2]));
+        }
         V3::new(
             self.read(id, 3 * i),
             self.read(id, 3 * i + 1),
             self.read(id, 3 * i + 2),
         )
+    }
+
+    /// Elements `2i, 2i+1` as a vector (texture coordinates).
+    #[inline(always)]
+    pub fn read2<R: Real>(&self, id: ParamId, i: usize) -> V2<R> {
+        if !R::DIFFERENTIABLE {
+            let v = &self.store.data(id)[2 * i..2 * i + 2];
+            return V2::new(R::cst(v[0]), R::cst(v[1]));
+        }
+        V2::new(self.read(id, 2 * i), self.read(id, 2 * i + 1))
     }
 }
 

@@ -10,6 +10,7 @@ use crate::image::{read_image, srgb_to_linear};
 use crate::math::{Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::{LoadContext, Node};
+use glam::{Vec2, Vec3};
 
 /// Texel filter of a bitmap lookup (`filter_type`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -36,6 +37,10 @@ impl WrapMode {
     #[inline]
     pub fn wrap(self, i: i64, n: usize) -> usize {
         let n = n as i64;
+        // inside the image (most lookups): no integer division
+        if (0..n).contains(&i) {
+            return i as usize;
+        }
         (match self {
             WrapMode::Repeat => i.rem_euclid(n),
             WrapMode::Clamp => i.clamp(0, n - 1),
@@ -226,6 +231,9 @@ impl Bitmap {
 
     /// The filtered value at texture coordinates `uv` (after `to_uv`).
     pub fn lookup<R: Real>(&self, store: &ParamView, uv: V2<R>) -> Spectrum<R> {
+        if !R::DIFFERENTIABLE {
+            return V3::cst(self.lookup_primal(store.data(self.data), uv.val()));
+        }
         let (w, h) = (self.width, self.height);
         match self.filter {
             FilterType::Nearest => {
@@ -238,6 +246,34 @@ impl Bitmap {
                 let (gx, gy) = (R::cst(1.0) - fx, R::cst(1.0) - fy);
                 let top = self.texel(store, xa, ya) * gx + self.texel(store, xb, ya) * fx;
                 let bottom = self.texel(store, xa, yb) * gx + self.texel(store, xb, yb) * fx;
+                top * gy + bottom * fy
+            }
+        }
+    }
+
+    /// [`Bitmap::lookup`] without derivatives, reading the texels `data`
+    /// directly (the same arithmetic: images are unchanged).
+    fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
+        let (w, h) = (self.width, self.height);
+        let texel = |x: usize, y: usize| {
+            let i = y * w + x;
+            if self.channels == 3 {
+                Vec3::from_slice(&data[3 * i..3 * i + 3])
+            } else {
+                Vec3::splat(data[i])
+            }
+        };
+        match self.filter {
+            FilterType::Nearest => {
+                let x = (uv.x * w as f32).floor() as i64;
+                let y = (uv.y * h as f32).floor() as i64;
+                texel(self.wrap.wrap(x, w), self.wrap.wrap(y, h))
+            }
+            FilterType::Bilinear => {
+                let ([xa, xb, ya, yb], fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
+                let (gx, gy) = (1.0 - fx, 1.0 - fy);
+                let top = texel(xa, ya) * gx + texel(xb, ya) * fx;
+                let bottom = texel(xa, yb) * gx + texel(xb, yb) * fx;
                 top * gy + bottom * fy
             }
         }
