@@ -267,6 +267,75 @@ impl GridVolume {
     pub fn max(&self, store: &ParamStore) -> f32 {
         store.data(self.data).iter().copied().fold(0.0, f32::max)
     }
+
+    /// World to the grid's unit cube.
+    pub fn to_local(&self) -> &Transform {
+        &self.to_local
+    }
+
+    /// For a coarse grid over the unit cube, `cells` along each axis of `k`
+    /// voxels each (the last may reach past the grid), the largest value
+    /// (over channels) that a lookup at a point of each cell can read:
+    /// a point in cell c of an axis reads voxels c·k − 1 ..= (c+1)·k,
+    /// wrapped (trilinear lookups reach the voxel on each side; nearest
+    /// lookups at the cell's faces too). Row-major `[z, y, x]`; computed
+    /// one axis at a time.
+    pub fn cell_maxima(&self, store: &ParamStore, k: [usize; 3], cells: [usize; 3]) -> Vec<f32> {
+        let data = store.data(self.data);
+        let [nx, ny, nz] = self.res;
+        let [cx, cy, cz] = cells;
+        // per axis and cell, the voxels the cell reads
+        let reach: Vec<Vec<Vec<usize>>> = (0..3)
+            .map(|a| {
+                (0..cells[a])
+                    .map(|c| {
+                        let (lo, hi) = ((c * k[a]) as i64 - 1, ((c + 1) * k[a]) as i64);
+                        (lo..=hi).map(|i| self.wrap.index(i, self.res[a])).collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let ch = self.channels;
+        let voxel = |i: usize| {
+            data[ch * i..ch * (i + 1)]
+                .iter()
+                .copied()
+                .fold(0.0, f32::max)
+        };
+        // along x: [z, y, cell x]
+        let mut along_x = vec![0.0f32; nz * ny * cx];
+        for (row, out) in along_x.chunks_exact_mut(cx).enumerate() {
+            for (c, m) in out.iter_mut().enumerate() {
+                *m = reach[0][c]
+                    .iter()
+                    .map(|&x| voxel(row * nx + x))
+                    .fold(0.0, f32::max);
+            }
+        }
+        // along y: [z, cell y, cell x]
+        let mut along_y = vec![0.0f32; nz * cy * cx];
+        for z in 0..nz {
+            for c in 0..cy {
+                for x in 0..cx {
+                    along_y[(z * cy + c) * cx + x] = reach[1][c]
+                        .iter()
+                        .map(|&y| along_x[(z * ny + y) * cx + x])
+                        .fold(0.0, f32::max);
+                }
+            }
+        }
+        // along z: [cell z, cell y, cell x]
+        let mut cellmax = vec![0.0f32; cz * cy * cx];
+        for c in 0..cz {
+            for yx in 0..cy * cx {
+                cellmax[c * cy * cx + yx] = reach[2][c]
+                    .iter()
+                    .map(|&z| along_y[z * cy * cx + yx])
+                    .fold(0.0, f32::max);
+            }
+        }
+        cellmax
+    }
 }
 
 /// ⌊x⌋, without the library call that `f32::floor` is on x86-64 without
