@@ -27,8 +27,9 @@ use glam::{Vec3, Vec4};
 
 /// Cells along each axis at most. 16³ cells of 4³ voxels for a 64³ grid:
 /// on `volume_hetero` they hold 14 % of the majorant of the whole grid on
-/// average over its volume (8³ cells hold 21 %), for a few DDA steps per
-/// ray.
+/// average over its volume (8³ cells 21 %, 32³ cells 11 %). Rendering it
+/// took the same time with 8³ cells and 12 % longer with 32³, where the
+/// DDA's steps cost more than the lookups they save.
 const CELLS: usize = 16;
 
 /// A coarse grid of majorants over an extinction grid's unit cube.
