@@ -1,7 +1,7 @@
 //! Forward-mode dual numbers: a value and its derivative along one tangent
 //! direction of the parameter space.
 
-use super::Real;
+use super::{weighted_sum, Real};
 use crate::params::{ParamId, ParamView};
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -37,6 +37,12 @@ impl Real for Dual {
     #[inline(always)]
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         Dual::new(store.value(id, index), store.tangent(id, index))
+    }
+    #[inline(always)]
+    fn param_sum(store: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> Self {
+        // the sums a product and a sum per element would make, bit for bit
+        let d = store.tangents(id).map_or(0.0, |t| weighted_sum(t, terms));
+        Dual::new(weighted_sum(store.data(id), terms), d)
     }
     fn tracks(store: &ParamView, id: ParamId) -> bool {
         store.has_tangent(id)

@@ -58,6 +58,22 @@ pub trait Real:
     /// Element `index` of parameter `id`, read from `store`: the one place
     /// where derivatives are seeded (forward) or tagged (reverse).
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self;
+    /// Σ_k w_k · (element i_k of parameter `id`) over `terms` = (i_k, w_k),
+    /// terms of weight 0 left out: a filtered read (a grid's trilinear
+    /// interpolation) in one step. Its primal is [`weighted_sum`] in every
+    /// number type; `f32` reads the values directly, and reverse mode
+    /// records one tape node for the whole sum instead of a product and a
+    /// sum per element.
+    #[inline(always)]
+    fn param_sum(store: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> Self {
+        let mut v = Self::cst(0.0);
+        for &(i, w) in terms {
+            if w != 0.0 {
+                v += Self::from_param(store, id, i) * w;
+            }
+        }
+        v
+    }
     /// Whether reads of parameter `id` carry derivatives (a tangent is set
     /// in forward mode, its gradient is requested in reverse mode): lets
     /// code that only exists for such derivatives be skipped.
@@ -132,6 +148,19 @@ pub trait Real:
     }
 }
 
+/// Σ_k w_k · data[i_k], in the order of `terms`, terms of weight 0 left
+/// out: the primal of [`Real::param_sum`].
+#[inline(always)]
+pub fn weighted_sum(data: &[f32], terms: &[(usize, f32)]) -> f32 {
+    let mut v = 0.0;
+    for &(i, w) in terms {
+        if w != 0.0 {
+            v += data[i] * w;
+        }
+    }
+    v
+}
+
 impl Real for f32 {
     const DIFFERENTIABLE: bool = false;
     #[inline(always)]
@@ -145,6 +174,10 @@ impl Real for f32 {
     #[inline(always)]
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         store.value(id, index)
+    }
+    #[inline(always)]
+    fn param_sum(store: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> Self {
+        weighted_sum(store.data(id), terms)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {

@@ -8,7 +8,7 @@
 //! [`backward`], scatters the result into parameter gradients, and clears
 //! the tape: memory stays independent of path length and sample count.
 
-use super::Real;
+use super::{weighted_sum, Real};
 use crate::params::{ParamId, ParamView};
 use std::cell::RefCell;
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -26,8 +26,10 @@ struct TapeNode {
 
 struct Tape {
     nodes: Vec<TapeNode>,
-    /// Leaves read from the parameter store: (parameter, element, node).
-    leaves: Vec<(ParamId, u32, u32)>,
+    /// Leaves read from the parameter store: (parameter, element, node,
+    /// weight): the node's value holds weight × the element (a node may
+    /// sum several elements: [`Real::param_sum`]).
+    leaves: Vec<(ParamId, u32, u32, f32)>,
     /// Adjoint scratch space, reused between calls.
     adjoints: Vec<f32>,
 }
@@ -148,8 +150,8 @@ pub fn backward(outputs: &[(Var, f32)], mut scatter: impl FnMut(ParamId, usize, 
                     }
                 }
             }
-            for &(id, index, node) in &t.leaves {
-                let a = t.adjoints[node as usize];
+            for &(id, index, node, w) in &t.leaves {
+                let a = t.adjoints[node as usize] * w;
                 if a != 0.0 && a.is_finite() {
                     scatter(id, index as usize, a);
                 }
@@ -188,7 +190,28 @@ impl Real for Var {
                 args: [CONST, CONST],
                 partials: [0.0, 0.0],
             });
-            t.leaves.push((id, index as u32, node));
+            t.leaves.push((id, index as u32, node, 1.0));
+            Var { v, node }
+        })
+    }
+    /// One node whose leaves are the summed elements, with their weights.
+    fn param_sum(store: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> Self {
+        let v = weighted_sum(store.data(id), terms);
+        if !store.is_recorded(id) {
+            return Var::cst(v);
+        }
+        TAPE.with(|t| {
+            let mut t = t.borrow_mut();
+            let node = t.nodes.len() as u32;
+            t.nodes.push(TapeNode {
+                args: [CONST, CONST],
+                partials: [0.0, 0.0],
+            });
+            for &(i, w) in terms {
+                if w != 0.0 {
+                    t.leaves.push((id, i as u32, node, w));
+                }
+            }
             Var { v, node }
         })
     }
@@ -422,5 +445,51 @@ mod tests {
         let w = (v * 3.0 + Var::cst(2.0)).sqrt();
         assert!(!w.is_attached());
         TAPE.with(|t| assert!(t.borrow().nodes.is_empty()));
+    }
+
+    /// A weighted sum of parameter elements read in one step has the value
+    /// and derivatives of the sum of products in every number type, and
+    /// reverse mode records one node for it.
+    #[test]
+    fn param_sums_match_sums_of_reads() {
+        let mut s = ParamStore::new();
+        let data = vec![0.3, 1.7, 0.0, 2.25, 0.9];
+        let id = s
+            .add(
+                "g.data",
+                data,
+                vec![5],
+                ParamFlags::DIFFERENTIABLE,
+                Domain::Finite,
+            )
+            .unwrap();
+        let terms = [(1, 0.25), (3, 0.0), (4, 0.6), (0, 0.15), (1, 0.3)];
+        fn generic<R: Real>(s: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> R {
+            let mut v = R::cst(0.0);
+            for &(i, w) in terms {
+                if w != 0.0 {
+                    v += s.read::<R>(id, i) * w;
+                }
+            }
+            v
+        }
+        let primal = s.primal();
+        let v = f32::param_sum(&primal, id, &terms);
+        assert_eq!(v, generic::<f32>(&primal, id, &terms));
+        let tangent = [0.5, -1.0, 2.0, 3.0, 0.25];
+        let seeds = Seeds::tangents(&s, &[("g.data", &tangent)]).unwrap();
+        let d = Dual::param_sum(&s.view(&seeds), id, &terms);
+        assert_eq!(d, generic::<Dual>(&s.view(&seeds), id, &terms));
+        assert_eq!(d.v, v);
+        let recorded = Seeds::recorded(&s, &[id]).unwrap();
+        clear_tape();
+        let out = Var::param_sum(&s.view(&recorded), id, &terms);
+        assert_eq!(out.v, v);
+        TAPE.with(|t| assert_eq!(t.borrow().nodes.len(), 1));
+        let mut grad = [0.0f32; 5];
+        backward(&[(out * 2.0, 1.0)], |_, i, g| grad[i] += g);
+        for (g, want) in grad.iter().zip([0.3, 1.1, 0.0, 0.0, 1.2]) {
+            assert!((g - want).abs() < 1e-6, "{grad:?}");
+        }
     }
 }

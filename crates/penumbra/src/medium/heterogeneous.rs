@@ -22,6 +22,29 @@
 //! Transmittance is estimated by ratio tracking (Novák et al. 2014): the
 //! product of σ_n / m over the tentative collisions, differentiable as it
 //! stands.
+//!
+//! The majorant is local: with a grid extinction, m is the bound of the
+//! cell of a coarse majorant grid the collision lies in (`majorant.rs`),
+//! still [`MAJORANT_FACTOR`] × the largest extinction the cell can read.
+//! Both trackers walk the cells along the ray (regular tracking: an
+//! exponential optical depth is drawn once per tentative collision and
+//! spent across cells, m × length per cell), and cells of majorant 0 are
+//! skipped: empty space costs no lookups.
+//!
+//! Empty cells and derivatives: the derivative of the transmittance
+//! through a cell is carried by its null collisions, one −1/m per
+//! collision at rate m. A cell whose voxels are all 0 has none, so its
+//! voxels would get no gradient, and a cell of tiny majorant would give
+//! theirs with a huge variance; yet in a reconstruction voxels at 0 must
+//! be able to grow. So while the extinction grid's values are
+//! differentiated (a tangent is set for them, or reverse mode records
+//! them), no cell's majorant is below [`TRACKED_FLOOR`] × the largest
+//! extinction. This depends on the derivative call, the same for all its
+//! samples and every number type, never on the number type: a path
+//! makes the same decisions in f32 and on the tape. Primal renders, and
+//! derivatives of the albedo or the scale (which have no derivative where
+//! the density is 0), skip empty cells entirely. A grid that is 0
+//! everywhere has no majorant at all and gets no gradient.
 
 use super::{FreeFlight, Medium};
 use crate::ad::Real;
@@ -30,13 +53,31 @@ use crate::math::Spectrum;
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
 
-/// The majorant over the largest extinction of the medium.
+/// The majorant over the largest extinction it bounds.
 pub(super) const MAJORANT_FACTOR: f32 = 1.1;
 
-/// The next tentative collision after `t` at rate `m`.
+/// The least majorant of a cell while the extinction grid is
+/// differentiated, over the largest extinction of the medium: the same
+/// margin as [`MAJORANT_FACTOR`] adds where the density is at its largest.
+pub(super) const TRACKED_FLOOR: f32 = 0.1;
+
+/// An optical depth to the next tentative collision (in units of the
+/// majorant times distance).
 #[inline]
-fn next_collision(t: f32, m: f32, rng: &mut SampleStream) -> f32 {
-    t - (1.0 - rng.next_1d()).ln() / m
+fn optical_depth(rng: &mut SampleStream) -> f32 {
+    -(1.0 - rng.next_1d()).ln()
+}
+
+/// Whether the tracking weight σ_n / (m − mean σ) of a null collision is
+/// 1 with no derivative (a grey extinction that carries none), so that it
+/// need not be multiplied in.
+#[inline]
+fn null_is_one<R: Real>(sigma_t: Spectrum<R>) -> bool {
+    let s = sigma_t.val();
+    s.min_element() == s.max_element()
+        && sigma_t.x.is_const()
+        && sigma_t.y.is_const()
+        && sigma_t.z.is_const()
 }
 
 pub(super) fn sample_free_flight<R: Real>(
@@ -47,20 +88,32 @@ pub(super) fn sample_free_flight<R: Real>(
     rng: &mut SampleStream,
 ) -> FreeFlight<R> {
     let mut weight = Spectrum::<R>::splat(R::cst(1.0));
-    let m = medium.majorant;
-    let Some((mut t, t_end)) = medium.clip(ray, t_max).filter(|_| m > 0.0) else {
+    let mono = medium.sigma_t.is_mono();
+    let mut walk = medium.segments(store, ray, t_max);
+    let Some(mut seg) = walk.next() else {
         return FreeFlight::Pass { weight };
     };
+    let mut tau = optical_depth(rng);
+    let mut t = seg.t0;
     loop {
-        t = next_collision(t, m, rng);
-        if t >= t_end {
-            return FreeFlight::Pass { weight };
+        let m = seg.majorant;
+        let dt = tau / m;
+        if t + dt >= seg.t1 {
+            // the rest of the optical depth goes on to the next segment
+            tau = (tau - (seg.t1 - t) * m).max(0.0);
+            let Some(next) = walk.next() else {
+                return FreeFlight::Pass { weight };
+            };
+            seg = next;
+            t = seg.t0;
+            continue;
         }
+        t += dt;
         let p = ray.at(t);
-        let (sigma_t, albedo) = medium.coefficients::<R>(store, p);
+        let sigma_t = medium.extinction::<R>(store, p);
         let mean = sigma_t.val().element_sum() / 3.0;
-        let real = mean / m;
-        if rng.next_1d() < real {
+        if rng.next_1d() < mean / m {
+            let albedo = medium.albedo.eval::<R>(store, p);
             let scatter = sigma_t.mul_elem(albedo) * R::cst(1.0 / mean);
             return FreeFlight::Scatter {
                 t,
@@ -68,12 +121,15 @@ pub(super) fn sample_free_flight<R: Real>(
                 weight: weight.mul_elem(scatter),
             };
         }
-        // 1 for a grey medium, unless derivatives are wanted
-        let s = sigma_t.val();
-        if R::DIFFERENTIABLE || s.min_element() != s.max_element() {
-            let null = sigma_t.map(|s| R::cst(m) - s) * R::cst(1.0 / (m - mean));
-            weight = weight.mul_elem(null);
+        if !null_is_one(sigma_t) {
+            let k = R::cst(1.0 / (m - mean));
+            weight = if mono {
+                weight * ((R::cst(m) - sigma_t.x) * k)
+            } else {
+                weight.mul_elem(sigma_t.map(|s| (R::cst(m) - s) * k))
+            };
         }
+        tau = optical_depth(rng);
     }
 }
 
@@ -85,21 +141,38 @@ pub(super) fn transmittance<R: Real>(
     rng: &mut SampleStream,
 ) -> Spectrum<R> {
     let mut tr = Spectrum::<R>::splat(R::cst(1.0));
-    let m = medium.majorant;
-    let Some((mut t, t_end)) = medium.clip(ray, t_max).filter(|_| m > 0.0) else {
+    let mono = medium.sigma_t.is_mono();
+    let mut walk = medium.segments(store, ray, t_max);
+    let Some(mut seg) = walk.next() else {
         return tr;
     };
+    let mut tau = optical_depth(rng);
+    let mut t = seg.t0;
     loop {
-        t = next_collision(t, m, rng);
-        if t >= t_end {
-            return tr;
+        let m = seg.majorant;
+        let dt = tau / m;
+        if t + dt >= seg.t1 {
+            tau = (tau - (seg.t1 - t) * m).max(0.0);
+            let Some(next) = walk.next() else {
+                return tr;
+            };
+            seg = next;
+            t = seg.t0;
+            continue;
         }
-        let (sigma_t, _) = medium.coefficients::<R>(store, ray.at(t));
-        tr = tr.mul_elem(sigma_t.map(|s| (R::cst(m) - s) * (1.0 / m)));
+        t += dt;
+        let sigma_t = medium.extinction::<R>(store, ray.at(t));
+        let k = 1.0 / m;
+        tr = if mono {
+            tr * ((R::cst(m) - sigma_t.x) * k)
+        } else {
+            tr.mul_elem(sigma_t.map(|s| (R::cst(m) - s) * k))
+        };
         // Without derivatives a zero estimate stays zero. With them it does
         // not end here: the derivative of a factor that is zero is not.
         if !R::DIFFERENTIABLE && tr.val() == glam::Vec3::ZERO {
             return tr;
         }
+        tau = optical_depth(rng);
     }
 }

@@ -82,5 +82,5 @@ pub(super) fn transmittance<R: Real>(
     ray: &Ray,
     t_max: f32,
 ) -> Spectrum<R> {
-    attenuation(m.coefficients::<R>(store, ray.o).0, t_max)
+    attenuation(m.extinction::<R>(store, ray.o), t_max)
 }

@@ -19,6 +19,7 @@
 
 mod heterogeneous;
 mod homogeneous;
+mod majorant;
 
 use crate::ad::Real;
 use crate::error::Result;
@@ -30,6 +31,7 @@ use crate::sampler::SampleStream;
 use crate::scene::{Class, LoadContext, Node};
 use crate::volume::Volume;
 use glam::Vec3;
+use majorant::{MajorantGrid, Walk};
 
 /// How a medium samples distances.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,6 +61,12 @@ pub struct Medium {
     /// An upper bound of the extinction over space and channels (primal),
     /// for delta and ratio tracking; refreshed by `parameters_changed`.
     majorant: f32,
+    /// Local upper bounds, over the cells of a grid extinction (see
+    /// `majorant.rs`); refreshed by `parameters_changed`.
+    majorant_grid: Option<MajorantGrid>,
+    /// The least majorant of a cell while the extinction grid's values are
+    /// differentiated (see `heterogeneous.rs`).
+    tracked_floor: f32,
 }
 
 /// What a free flight found.
@@ -128,25 +136,61 @@ impl Medium {
             sample_emitters,
             bbox,
             majorant: 0.0,
+            majorant_grid: None,
+            tracked_floor: 0.0,
         };
+        if kind == MediumKind::Heterogeneous {
+            m.majorant_grid = m.sigma_t.grid().and_then(MajorantGrid::new);
+        }
         m.parameters_changed(&ctx.store);
         Ok(m)
     }
 
-    /// Refreshes the majorant after parameter updates.
+    /// Refreshes the majorants after parameter updates.
     pub fn parameters_changed(&mut self, store: &ParamStore) {
-        self.majorant =
-            heterogeneous::MAJORANT_FACTOR * store.value(self.scale, 0) * self.sigma_t.max(store);
+        let scale = store.value(self.scale, 0);
+        let max = scale * self.sigma_t.max(store);
+        self.majorant = heterogeneous::MAJORANT_FACTOR * max;
+        self.tracked_floor = heterogeneous::TRACKED_FLOOR * max;
+        if let (Some(m), Some(grid)) = (&mut self.majorant_grid, self.sigma_t.grid()) {
+            m.update(grid, store, heterogeneous::MAJORANT_FACTOR * scale);
+        }
+    }
+
+    /// σ_t at `p`, in `R`; one number on all channels for a one-channel
+    /// extinction (one product, one tape node in reverse mode).
+    #[inline]
+    fn extinction<R: Real>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
+        let scale: R = store.read(self.scale, 0);
+        let s = self.sigma_t.eval::<R>(store, p);
+        if self.sigma_t.is_mono() {
+            Spectrum::splat(s.x * scale)
+        } else {
+            s * scale
+        }
     }
 
     /// σ_t and α at `p`, in `R`.
     #[inline]
     fn coefficients<R: Real>(&self, store: &ParamView, p: Vec3) -> (Spectrum<R>, Spectrum<R>) {
-        let scale: R = store.read(self.scale, 0);
-        (
-            self.sigma_t.eval::<R>(store, p) * scale,
-            self.albedo.eval(store, p),
-        )
+        (self.extinction(store, p), self.albedo.eval(store, p))
+    }
+
+    /// The parts of `ray` (unit direction) over `[0, t_max]` in the
+    /// medium, with their majorants (primal, whatever the number type).
+    fn segments(&self, store: &ParamView, ray: &Ray, t_max: f32) -> Walk<'_> {
+        let Some((t0, t1)) = self.clip(ray, t_max) else {
+            return Walk::empty();
+        };
+        let (Some(m), Some(grid)) = (&self.majorant_grid, self.sigma_t.grid()) else {
+            return Walk::uniform(t0, t1, self.majorant);
+        };
+        let floor = if store.has_tangent(grid.data) || store.is_recorded(grid.data) {
+            self.tracked_floor
+        } else {
+            0.0
+        };
+        m.walk(ray, t0, t1, self.majorant, floor)
     }
 
     /// The range of `t` in `[0, t_max]` where `ray` is inside the medium's

@@ -455,6 +455,15 @@ impl<'a> ParamView<'a> {
         }
     }
 
+    /// The forward-mode tangent of `id`, if one is set.
+    #[inline(always)]
+    pub fn tangents(&self, id: ParamId) -> Option<&[f32]> {
+        match self.seeds.tangents.get(id.0 as usize) {
+            Some(Some(t)) => Some(t),
+            _ => None,
+        }
+    }
+
     /// Whether a tangent is set for `id`.
     pub fn has_tangent(&self, id: ParamId) -> bool {
         matches!(self.seeds.tangents.get(id.0 as usize), Some(Some(_)))

@@ -53,6 +53,11 @@ impl ConstVolume {
         self.value.value(store)
     }
 
+    /// One value on all channels.
+    pub fn is_mono(&self) -> bool {
+        matches!(self.value.channels, Channels::Mono)
+    }
+
     pub fn max(&self, store: &ParamStore) -> f32 {
         self.value.max(store)
     }

@@ -214,26 +214,35 @@ impl GridVolume {
                 self.voxel(store, [i.x as i64, i.y as i64, i.z as i64])
             }
             Filter::Trilinear => {
-                let i0 = x.floor();
-                let f = x - i0;
-                let i0 = [i0.x as i64, i0.y as i64, i0.z as i64];
-                let mut v = Spectrum::<R>::zero();
-                for corner in 0..8 {
-                    let d = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
-                    let mut w = 1.0;
-                    for a in 0..3 {
-                        w *= if d[a] == 1 { f[a] } else { 1.0 - f[a] };
-                    }
-                    if w != 0.0 {
-                        let i = [
-                            i0[0] + d[0] as i64,
-                            i0[1] + d[1] as i64,
-                            i0[2] + d[2] as i64,
-                        ];
-                        v += self.voxel::<R>(store, i) * R::cst(w);
-                    }
+                // per axis: the two voxels around x (wrapped) and their
+                // weights
+                let axis = |a: usize| {
+                    let i = floor(x[a]);
+                    let f = x[a] - i as f32;
+                    let n = self.res[a];
+                    (
+                        [self.wrap.index(i, n), self.wrap.index(i + 1, n)],
+                        [1.0 - f, f],
+                    )
+                };
+                let ((ix, wx), (iy, wy), (iz, wz)) = (axis(0), axis(1), axis(2));
+                let [nx, ny, _] = self.res;
+                let mut terms = [(0usize, 0.0f32); 8];
+                for (corner, term) in terms.iter_mut().enumerate() {
+                    let (dx, dy, dz) = (corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+                    *term = (
+                        (iz[dz] * ny + iy[dy]) * nx + ix[dx],
+                        wx[dx] * wy[dy] * wz[dz],
+                    );
                 }
-                v
+                if self.channels == 1 {
+                    V3::splat(R::param_sum(store, self.data, &terms))
+                } else {
+                    let channel = |c: usize| {
+                        R::param_sum(store, self.data, &terms.map(|(i, w)| (3 * i + c, w)))
+                    };
+                    V3::new(channel(0), channel(1), channel(2))
+                }
             }
         }
     }
@@ -258,6 +267,83 @@ impl GridVolume {
     pub fn max(&self, store: &ParamStore) -> f32 {
         store.data(self.data).iter().copied().fold(0.0, f32::max)
     }
+
+    /// World to the grid's unit cube.
+    pub fn to_local(&self) -> &Transform {
+        &self.to_local
+    }
+
+    /// For a coarse grid over the unit cube, `cells` along each axis of `k`
+    /// voxels each (the last may reach past the grid), the largest value
+    /// (over channels) that a lookup at a point of each cell can read:
+    /// a point in cell c of an axis reads voxels c·k − 1 ..= (c+1)·k,
+    /// wrapped (trilinear lookups reach the voxel on each side; nearest
+    /// lookups at the cell's faces too). Row-major `[z, y, x]`; computed
+    /// one axis at a time.
+    pub fn cell_maxima(&self, store: &ParamStore, k: [usize; 3], cells: [usize; 3]) -> Vec<f32> {
+        let data = store.data(self.data);
+        let [nx, ny, nz] = self.res;
+        let [cx, cy, cz] = cells;
+        // per axis and cell, the voxels the cell reads
+        let reach: Vec<Vec<Vec<usize>>> = (0..3)
+            .map(|a| {
+                (0..cells[a])
+                    .map(|c| {
+                        let (lo, hi) = ((c * k[a]) as i64 - 1, ((c + 1) * k[a]) as i64);
+                        (lo..=hi).map(|i| self.wrap.index(i, self.res[a])).collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let ch = self.channels;
+        let voxel = |i: usize| {
+            data[ch * i..ch * (i + 1)]
+                .iter()
+                .copied()
+                .fold(0.0, f32::max)
+        };
+        // along x: [z, y, cell x]
+        let mut along_x = vec![0.0f32; nz * ny * cx];
+        for (row, out) in along_x.chunks_exact_mut(cx).enumerate() {
+            for (c, m) in out.iter_mut().enumerate() {
+                *m = reach[0][c]
+                    .iter()
+                    .map(|&x| voxel(row * nx + x))
+                    .fold(0.0, f32::max);
+            }
+        }
+        // along y: [z, cell y, cell x]
+        let mut along_y = vec![0.0f32; nz * cy * cx];
+        for z in 0..nz {
+            for c in 0..cy {
+                for x in 0..cx {
+                    along_y[(z * cy + c) * cx + x] = reach[1][c]
+                        .iter()
+                        .map(|&y| along_x[(z * ny + y) * cx + x])
+                        .fold(0.0, f32::max);
+                }
+            }
+        }
+        // along z: [cell z, cell y, cell x]
+        let mut cellmax = vec![0.0f32; cz * cy * cx];
+        for c in 0..cz {
+            for yx in 0..cy * cx {
+                cellmax[c * cy * cx + yx] = reach[2][c]
+                    .iter()
+                    .map(|&z| along_y[z * cy * cx + yx])
+                    .fold(0.0, f32::max);
+            }
+        }
+        cellmax
+    }
+}
+
+/// ⌊x⌋, without the library call that `f32::floor` is on x86-64 without
+/// SSE 4.1 (the lookups' hot spot otherwise).
+#[inline(always)]
+fn floor(x: f32) -> i64 {
+    let i = x as i64;
+    i - ((i as f32) > x) as i64
 }
 
 /// The axis-aligned box around the image of the unit cube.

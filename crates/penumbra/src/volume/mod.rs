@@ -87,6 +87,23 @@ impl Volume {
         }
     }
 
+    /// One value on all channels (a float constant, a one-channel grid):
+    /// [`Volume::eval`] gives the same number thrice.
+    pub fn is_mono(&self) -> bool {
+        match self {
+            Volume::Const(v) => v.is_mono(),
+            Volume::Grid(v) => v.channels == 1,
+        }
+    }
+
+    /// The grid, for a grid volume.
+    pub fn grid(&self) -> Option<&GridVolume> {
+        match self {
+            Volume::Const(_) => None,
+            Volume::Grid(v) => Some(v),
+        }
+    }
+
     /// The world-space box outside which the volume is not defined (a
     /// grid's), or `None` for a volume that fills space.
     pub fn bbox(&self) -> Option<(Vec3, Vec3)> {
