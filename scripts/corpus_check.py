@@ -8,7 +8,7 @@ A development tool, not a test (it needs Mitsuba 3; CI has none):
   export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
   ~/.cache/penumbra-mitsuba/venv/bin/python scripts/corpus_check.py \
       [--penumbra target/release/penumbra] [--spp 64] [--res 96] \
-      [--variant scalar_rgb] [--only SUBSTRING] [--no-doc]
+      [--variant scalar_rgb] [--only SUBSTRING] [--no-doc] [--doc-only]
 
 For each scene (a corpus XML file that no other corpus file includes and
 that does not sit in an include/ or fragments/ folder):
@@ -36,11 +36,13 @@ that does not sit in an include/ or fragments/ folder):
    A scene matches when fewer than FRAC_MATCH of the block values have
    |t| > T_OUT and the image means agree within Z_MEAN standard errors
    (per-seed image means), or when the block-wise relative L2 difference
-   is below REL_MATCH (noise-free scenes).
+   is below REL_MATCH (noise-free scenes). A match whose relative L2
+   difference exceeds NOISY (noise dominates) or whose images are black
+   is `inconclusive`.
 Outcomes: `mitsuba-fails` (excluded: Mitsuba 3 itself cannot render the
 file as found, e.g. an asset without a stand-in, a polarised or custom
 plugin), `refused` (Penumbra's first error line), `render-error`,
-`match`, `differs`.
+`match`, `differs`, `inconclusive`.
 """
 import argparse
 import json
@@ -65,6 +67,8 @@ T_OUT = 5.0
 FRAC_MATCH = 0.03
 Z_MEAN = 5.0
 REL_MATCH = 0.01
+NOISY = 0.25
+NOTES_MARKER = '<!-- analysis: kept by scripts/corpus_check.py -->'
 BLOCK = 4
 
 # --------------------------------------------------------------------------
@@ -229,11 +233,25 @@ def cube_mesh():
 
 def mesh_for(name):
     low = os.path.basename(name).lower()
-    if any(k in low for k in ('rect', 'plane', 'quad', 'background', 'floor', 'ground', 'wall')):
-        return quad_mesh()
-    if 'cube' in low or 'box' in low:
-        return cube_mesh()
-    return sphere_mesh()
+    stem = os.path.splitext(low)[0]
+    if any(k in low for k in ('rect', 'plane', 'quad', 'background', 'floor', 'ground', 'wall',
+                              'plate', 'ceiling', 'back', 'luminaire')):
+        v, n, uv, f = quad_mesh()
+    elif 'cube' in low or 'box' in low:
+        v, n, uv, f = cube_mesh()
+    else:
+        v, n, uv, f = sphere_mesh()
+    if 'bunny' in low:
+        # the scenes scale the (about 0.15 units tall) bunny by 12 or so
+        return [(0.08 * a, 0.08 * b + 0.1, 0.08 * c) for a, b, c in v], n, uv, f
+    if stem not in ('sphere', 'rectangle', 'plane', 'quad', 'cube'):
+        # distinct files get distinct sizes and offsets: stand-ins of
+        # different meshes placed alike must not coincide (coincident
+        # surfaces are ill-posed)
+        h = zlib.crc32(low.encode())
+        r, dz = 0.55 + 0.4 * (h % 100) / 100, 0.3 * ((h // 100) % 7 - 3) / 3
+        v = [(r * a, r * b, r * c + dz) for a, b, c in v]
+    return v, n, uv, f
 
 
 def write_obj(path, mesh):
@@ -299,7 +317,7 @@ def write_image(path, name):
     import numpy as np
     img = standin_image(name)
     ext = os.path.splitext(path)[1].lower()
-    if ext == '.exr':
+    if ext in ('.exr', '.hdr'):
         import mitsuba as mi
         if mi.variant() is None:
             mi.set_variant('scalar_rgb')
@@ -324,10 +342,23 @@ def write_vol(path, n=16):
         o.write(struct.pack(f'<{len(data)}f', *data))
 
 
-def make_standin(path, name, serialized_count):
+def same_name_in_repo(rel, ref):
+    """A corpus file of the same name in the same repository (e.g. the
+    Cornell box meshes that several folders of mitsuba-data hold)."""
+    repo = rel.split(os.sep)[0]
+    base = os.path.basename(ref)
+    for d, _, files in os.walk(os.path.join(CORPUS, repo)):
+        if base in files:
+            return os.path.join(d, base)
+    return None
+
+
+def make_standin(path, name, serialized_count, twin=None):
     ext = os.path.splitext(path)[1].lower()
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    if ext == '.obj':
+    if twin:
+        shutil.copyfile(twin, path)
+    elif ext == '.obj':
         write_obj(path, mesh_for(name))
     elif ext == '.ply':
         write_ply(path, mesh_for(name))
@@ -425,7 +456,8 @@ def prepare(args):
                 target = os.path.join(OUT, name, os.path.dirname(rel), ref)
                 if os.path.exists(target):
                     continue
-                ok = make_standin(target, ref, counts.get(ref, 0) + 1) and ok
+                ok = make_standin(target, ref, max(counts.get(ref, 0) + 1, 8),
+                                  same_name_in_repo(rel, ref)) and ok
             (standins if ok else missing).append(ref)
         # reduce films in the small copy (every file of the closure)
         overrides = {}
@@ -582,6 +614,9 @@ def check_scene(args, rel, meta):
     res['channels'] = [imgs[0].shape[-1], mi_imgs[0].shape[-1]]
     res.update(compare(imgs, mi_imgs))
     res['outcome'] = 'match' if res['match'] else 'differs'
+    if res['match'] and (res['rel_l2'] > NOISY or max(res['mean_mitsuba'], res['mean_penumbra']) < 1e-6):
+        # the noise hides any difference (or the image is black): no verdict
+        res['outcome'] = 'inconclusive'
     return res
 
 
@@ -629,6 +664,7 @@ def write_doc(results, args):
              f'| Mitsuba 3 renders | {len(rendered)} |',
              f'| of which Penumbra loads unchanged | {len(loads)} |',
              f'| of which match | {len(groups.get("match", []))} |',
+             f'| of which inconclusive (noise dominates, or black) | {len(groups.get("inconclusive", []))} |',
              f'| of which differ | {len(groups.get("differs", []))} |',
              f'| of which Penumbra loads, fails to render | {len(groups.get("render-error", []))} |',
              f'| of which Penumbra refuses | {len(groups.get("refused", []))} |',
@@ -657,11 +693,22 @@ def write_doc(results, args):
         note = r.get('penumbra_error') or r.get('note', '')
         if r['outcome'] == 'mitsuba-fails':
             note = 'Mitsuba: ' + r.get('mitsuba_error', '')
+            if r.get('penumbra_error'):
+                note += ' — Penumbra: ' + r['penumbra_error']
+            elif r.get('penumbra_load'):
+                note += ' — Penumbra: loads'
         note = note.replace(OUT + '/pristine/', '').replace(OUT + '/small/', '').replace('|', '\\|')
         lines.append(f"| `{r['scene']}` | {r['outcome']} | {fo} | {z} | {rl} | {means} | {st or ''} | {note} |")
     lines.append('')
+    text = '\n'.join(lines).replace(ROOT + '/', '')
+    # the hand-written analysis after the marker survives a new run
+    notes = ''
+    if os.path.exists(DOC):
+        old = read(DOC)
+        if NOTES_MARKER in old:
+            notes = old[old.index(NOTES_MARKER):]
     with open(DOC, 'w') as o:
-        o.write('\n'.join(lines))
+        o.write(text + '\n' + (notes or NOTES_MARKER + '\n'))
 
 
 def main():
@@ -674,7 +721,14 @@ def main():
     ap.add_argument('--timeout', type=int, default=300)
     ap.add_argument('--only', action='append', help='substring of the scenes to check (repeatable)')
     ap.add_argument('--no-doc', action='store_true', help='do not write docs/corpus.md')
+    # (--only merges its rows into the last results.json before writing the doc)
+    ap.add_argument('--doc-only', action='store_true',
+                    help='rewrite docs/corpus.md from out/corpus/results.json (no renders)')
     args = ap.parse_args()
+    if args.doc_only:
+        with open(os.path.join(OUT, 'results.json')) as f:
+            write_doc(json.load(f), args)
+        return
     roots, info = prepare(args)
     results = []
     for i, rel in enumerate(roots):
@@ -684,9 +738,16 @@ def main():
                  if 'rel_l2' in r else '')
         msg = r.get('penumbra_error') or (r.get('mitsuba_error') if r['outcome'] == 'mitsuba-fails' else '')
         print(f'[{i + 1}/{len(roots)}] {rel}: {r["outcome"]}{extra} {msg}', flush=True)
-    with open(os.path.join(OUT, 'results.json'), 'w') as o:
+    path = os.path.join(OUT, 'results.json')
+    if args.only and os.path.exists(path):
+        # a partial run replaces its scenes' rows of the last full run
+        with open(path) as f:
+            old = {r['scene']: r for r in json.load(f)}
+        old.update({r['scene']: r for r in results})
+        results = [old[k] for k in sorted(old)]
+    with open(path, 'w') as o:
         json.dump(results, o, indent=1, default=str)
-    if not args.no_doc and not args.only:
+    if not args.no_doc:
         write_doc(results, args)
 
 
