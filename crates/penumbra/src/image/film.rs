@@ -45,6 +45,9 @@ impl Film {
         // Output precision: Penumbra always writes float32 EXR.
         node.choice("component_format", &["float32", "float16"])?;
         node.choice("file_format", &["openexr", "exr"])?;
+        // Mitsuba 0.6's text overlay on the image; Mitsuba 3's hdrfilm accepts
+        // the parameter in scenes of every version and draws nothing.
+        node.bool("banner", false)?;
         let rfilter = match node.children(Class::Rfilter).as_slice() {
             [] => ReconstructionFilter::Gaussian {
                 stddev: 0.5,

@@ -13,7 +13,7 @@ use crate::math::DiscreteDistribution;
 use crate::medium::Medium;
 use crate::sensor::Sensor;
 use crate::texture::MeshAttribute;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 
 /// Builds plugins, remembering which node became which object.
@@ -36,6 +36,9 @@ struct Builder {
     sensors: Vec<Sensor>,
     media: Vec<Medium>,
     medium_of_node: HashMap<*const Node, u32>,
+    /// Area emitters that shapes built (the nodes), so that one declared at
+    /// the top level and referenced from a shape is built there only.
+    area_emitter_nodes: HashSet<*const Node>,
     integrator: Option<Integrator>,
 }
 
@@ -292,7 +295,10 @@ impl Builder {
             None => self.default_bsdf(node)?,
         };
         let emitter = match node.child("emitter")? {
-            Some(e) => Some(self.emitter(&e, Some(index))?),
+            Some(e) => {
+                self.area_emitter_nodes.insert(Rc::as_ptr(&e));
+                Some(self.emitter(&e, Some(index))?)
+            }
             None => None,
         };
         let interior = self.shape_medium(node, "interior")?;
@@ -347,8 +353,12 @@ impl Scene {
             sensors: Vec::new(),
             media: Vec::new(),
             medium_of_node: HashMap::new(),
+            area_emitter_nodes: HashSet::new(),
             integrator: None,
         };
+        // area emitters declared at the top level: built by the shapes that
+        // reference them (as in Mitsuba 3), checked after the loop
+        let mut top_level_areas = Vec::new();
         for p in &root.props {
             let Some(node) = root.child(&p.name)? else {
                 return Err(
@@ -360,6 +370,7 @@ impl Scene {
                 Class::Bsdf => {
                     b.bsdf(&node)?;
                 }
+                Class::Emitter if node.plugin == "area" => top_level_areas.push(node),
                 Class::Emitter => {
                     b.emitter(&node, None)?;
                     if let Some(t) = b.ctx.attribute_uses.first() {
@@ -391,6 +402,16 @@ impl Scene {
                         node.class.tag()
                     )))
                 }
+            }
+        }
+        for node in top_level_areas {
+            if !b.area_emitter_nodes.contains(&Rc::as_ptr(&node)) {
+                // Mitsuba 3 drops such an emitter without a word
+                crate::warn(format!(
+                    "{}: {node}: an area emitter at the top level that no shape references is \
+                     ignored (as by Mitsuba 3); nest it in a <shape> or reference it from one",
+                    node.loc
+                ));
             }
         }
         root.check_all_used()?;
