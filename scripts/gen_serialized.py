@@ -17,17 +17,18 @@ import sys
 import zlib
 
 MAGIC, VERSION = 0x041C, 4
-HAS_NORMALS, HAS_TEXCOORDS, DOUBLE = 0x0001, 0x0002, 0x2000
+HAS_NORMALS, HAS_TEXCOORDS, HAS_COLORS, DOUBLE = 0x0001, 0x0002, 0x0008, 0x2000
 
 
-def shape(name, positions, faces, normals=None, texcoords=None, double=False, extra_flags=0):
+def shape(name, positions, faces, normals=None, texcoords=None, colors=None, double=False,
+          extra_flags=0):
     """One shape: the uncompressed header, then its zlib stream."""
     flags = extra_flags | (HAS_NORMALS if normals else 0) | (HAS_TEXCOORDS if texcoords else 0)
-    flags |= DOUBLE if double else 0x1000
+    flags |= (HAS_COLORS if colors else 0) | (DOUBLE if double else 0x1000)
     real = 'd' if double else 'f'
     body = struct.pack('<I', flags) + name.encode() + b'\0'
     body += struct.pack('<QQ', len(positions), len(faces))
-    for arr in (positions, normals, texcoords):
+    for arr in (positions, normals, texcoords, colors):
         if arr:
             flat = [c for v in arr for c in v]
             body += struct.pack(f'<{len(flat)}{real}', *flat)

@@ -23,10 +23,8 @@ to f32). Standard library only:
 import os
 import struct
 import sys
-import zlib
 
-MAGIC, VERSION = 0x041C, 4
-HAS_NORMALS, HAS_COLORS, SINGLE, DOUBLE = 0x0001, 0x0008, 0x1000, 0x2000
+from gen_serialized import serialized, shape
 
 
 def floor():
@@ -54,20 +52,6 @@ def gem():
     return pos, None, col, faces
 
 
-def shape(name, pos, normals, col, faces, double):
-    flags = HAS_COLORS | (HAS_NORMALS if normals else 0) | (DOUBLE if double else SINGLE)
-    real = 'd' if double else 'f'
-    body = struct.pack('<I', flags) + name.encode() + b'\0'
-    body += struct.pack('<QQ', len(pos), len(faces))
-    for arr in (pos, normals, col):
-        if arr:
-            flat = [c for v in arr for c in v]
-            body += struct.pack(f'<{len(flat)}{real}', *flat)
-    flat = [i for f in faces for i in f]
-    body += struct.pack(f'<{len(flat)}I', *flat)
-    return struct.pack('<HH', MAGIC, VERSION) + zlib.compress(body)
-
-
 def f32(x):
     return struct.unpack('<f', struct.pack('<f', x))[0]
 
@@ -91,11 +75,9 @@ if __name__ == '__main__':
     out = sys.argv[1] if len(sys.argv) > 1 else os.path.join(
         root, 'scenes', 'conformance', 'assets')
     meshes = [('floor', floor(), False), ('gem', gem(), True)]
-    data, offsets = b'', []
-    for name, m, double in meshes:
-        offsets.append(len(data))
-        data += shape(name, *m, double)
-    data += struct.pack(f'<{len(offsets)}QI', *offsets, len(offsets))
+    data = serialized([
+        shape(name, pos, faces, normals=normals, colors=col, double=double)
+        for name, (pos, normals, col, faces), double in meshes])
     with open(os.path.join(out, 'vertex_color.serialized'), 'wb') as f:
         f.write(data)
     for k, (_, m, _) in enumerate(meshes):

@@ -72,6 +72,26 @@ fn push(args: [u32; 2], partials: [f32; 2]) -> u32 {
 }
 
 impl Var {
+    /// A tape node of value `v` whose leaves are the elements `terms`
+    /// (index, weight) of recorded parameter `id`; zero weights are left
+    /// out.
+    fn param_leaf(v: f32, id: ParamId, terms: &[(usize, f32)]) -> Var {
+        TAPE.with(|t| {
+            let mut t = t.borrow_mut();
+            let node = t.nodes.len() as u32;
+            t.nodes.push(TapeNode {
+                args: [CONST, CONST],
+                partials: [0.0, 0.0],
+            });
+            for &(i, w) in terms {
+                if w != 0.0 {
+                    t.leaves.push((id, i as u32, node, w));
+                }
+            }
+            Var { v, node }
+        })
+    }
+
     /// Result of a unary operation with derivative `d`.
     #[inline(always)]
     fn unary(self, v: f32, d: f32) -> Var {
@@ -183,16 +203,7 @@ impl Real for Var {
         if !store.is_recorded(id) {
             return Var::cst(v);
         }
-        TAPE.with(|t| {
-            let mut t = t.borrow_mut();
-            let node = t.nodes.len() as u32;
-            t.nodes.push(TapeNode {
-                args: [CONST, CONST],
-                partials: [0.0, 0.0],
-            });
-            t.leaves.push((id, index as u32, node, 1.0));
-            Var { v, node }
-        })
+        Var::param_leaf(v, id, &[(index, 1.0)])
     }
     /// One node whose leaves are the summed elements, with their weights.
     fn param_sum(store: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> Self {
@@ -200,20 +211,7 @@ impl Real for Var {
         if !store.is_recorded(id) {
             return Var::cst(v);
         }
-        TAPE.with(|t| {
-            let mut t = t.borrow_mut();
-            let node = t.nodes.len() as u32;
-            t.nodes.push(TapeNode {
-                args: [CONST, CONST],
-                partials: [0.0, 0.0],
-            });
-            for &(i, w) in terms {
-                if w != 0.0 {
-                    t.leaves.push((id, i as u32, node, w));
-                }
-            }
-            Var { v, node }
-        })
+        Var::param_leaf(v, id, terms)
     }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();
