@@ -213,6 +213,63 @@ fn surface_and_emitter_parameters() {
     }
 }
 
+/// A `pplastic` sphere (anisotropic roughness) and a rectangle (a
+/// textured diffuse reflectance) under an area light and a point light.
+fn pplastic_scene() -> Scene {
+    let tex = repo().join("scenes/textures/texture.exr");
+    let xml = format!(
+        r#"{HEADER}
+    <shape type="sphere">
+        <point name="center" x="-0.4" y="0.5" z="0"/>
+        <float name="radius" value="0.6"/>
+        <bsdf type="pplastic" id="coat">
+            <string name="distribution" value="ggx"/>
+            <float name="alpha_u" value="0.15"/>
+            <float name="alpha_v" value="0.3"/>
+            <rgb name="diffuse_reflectance" value="0.3, 0.5, 0.7"/>
+            <rgb name="specular_reflectance" value="0.9, 0.8, 0.7"/>
+            <float name="int_ior" value="1.6"/>
+        </bsdf>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.6"/><translate x="0.8" y="0.5" z="-0.3"/></transform>
+        <bsdf type="pplastic" id="tile">
+            <texture type="bitmap" name="diffuse_reflectance">
+                <string name="filename" value="{}"/>
+            </texture>
+            <float name="alpha" value="0.2"/>
+        </bsdf>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.5"/><lookat origin="1, 3, 1" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <emitter type="area"><rgb name="radiance" value="10, 9, 8"/></emitter>
+    </shape>
+    <emitter type="point">
+        <point name="position" x="-1.5" y="2" z="1.5"/>
+        <rgb name="intensity" value="4, 5, 6"/>
+    </emitter>
+</scene>"#,
+        tex.display()
+    );
+    Scene::load_str(&xml, Path::new("pplastic.xml"), &[]).unwrap()
+}
+
+#[test]
+fn pplastic_parameters() {
+    let mut scene = pplastic_scene();
+    for key in [
+        "coat.alpha_u",
+        "coat.alpha_v",
+        "coat.eta",
+        "coat.diffuse_reflectance.value",
+        "coat.specular_reflectance.value",
+        "tile.diffuse_reflectance.data",
+        "tile.alpha",
+    ] {
+        check(&mut scene, key);
+    }
+}
+
 /// A floor coloured by its PLY vertex colours and an octahedron by its
 /// per-face colours (the conformance set's meshes), through
 /// `mesh_attribute` textures.

@@ -20,6 +20,7 @@ pub mod microfacet;
 mod normalmap;
 mod null;
 mod plastic;
+mod pplastic;
 mod principled;
 mod principledthin;
 mod roughconductor;
@@ -39,6 +40,7 @@ pub use mask::{Mask, MaskContext};
 pub use normalmap::{NormalMap, PerturbedFrameContext};
 pub use null::{Null, NullContext};
 pub use plastic::{Plastic, PlasticContext};
+pub use pplastic::{PPlastic, PPlasticContext};
 pub use principled::{Ior, Principled, PrincipledContext};
 pub use principledthin::{PrincipledThin, PrincipledThinContext};
 pub use roughconductor::{RoughConductor, RoughConductorContext};
@@ -180,6 +182,7 @@ pub enum NodeContext<'a, R: Real> {
     RoughDielectric(RoughDielectricContext<R>),
     Plastic(PlasticContext<'a, R>),
     RoughPlastic(RoughPlasticContext<'a, R>),
+    PPlastic(PPlasticContext<R>),
     Principled(PrincipledContext<'a, R>),
     PrincipledThin(PrincipledThinContext<'a, R>),
     TwoSided(TwoSidedContext),
@@ -284,6 +287,7 @@ macro_rules! dispatch_context {
             NodeContext::RoughDielectric(c) => c.$method($($arg),*),
             NodeContext::Plastic(c) => c.$method($($arg),*),
             NodeContext::RoughPlastic(c) => c.$method($($arg),*),
+            NodeContext::PPlastic(c) => c.$method($($arg),*),
             NodeContext::Principled(c) => c.$method($($arg),*),
             NodeContext::PrincipledThin(c) => c.$method($($arg),*),
             NodeContext::Null(c) => c.$method($($arg),*),
@@ -325,6 +329,7 @@ pub enum Bsdf {
     RoughDielectric(RoughDielectric),
     Plastic(Plastic),
     RoughPlastic(RoughPlastic),
+    PPlastic(PPlastic),
     Principled(Principled),
     PrincipledThin(PrincipledThin),
     TwoSided(TwoSided),
@@ -345,6 +350,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "pplastic",
     "principled",
     "principledthin",
     "twosided",
@@ -366,6 +372,7 @@ macro_rules! dispatch {
             Bsdf::RoughDielectric($b) => $e,
             Bsdf::Plastic($b) => $e,
             Bsdf::RoughPlastic($b) => $e,
+            Bsdf::PPlastic($b) => $e,
             Bsdf::Principled($b) => $e,
             Bsdf::PrincipledThin($b) => $e,
             Bsdf::TwoSided($b) => $e,
@@ -414,6 +421,7 @@ impl Bsdf {
             "roughdielectric" => Bsdf::RoughDielectric(RoughDielectric::from_node(node, ctx)?),
             "plastic" => Bsdf::Plastic(Plastic::from_node(node, ctx)?),
             "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::from_node(node, ctx)?),
+            "pplastic" => Bsdf::PPlastic(PPlastic::from_node(node, ctx)?),
             "principled" => Bsdf::Principled(Principled::from_node(node, ctx)?),
             "principledthin" => Bsdf::PrincipledThin(PrincipledThin::from_node(node, ctx)?),
             "twosided" => Bsdf::TwoSided(TwoSided::from_node(node, ctx)?),
@@ -462,6 +470,7 @@ impl Bsdf {
         match self {
             Bsdf::Plastic(b) => b.parameters_changed(store),
             Bsdf::RoughPlastic(b) => b.parameters_changed(store),
+            Bsdf::PPlastic(b) => b.parameters_changed(store),
             Bsdf::TwoSided(b) => b.parameters_changed(store),
             Bsdf::BlendBsdf(b) => b.parameters_changed(store),
             Bsdf::Mask(b) => b.parameters_changed(store),
@@ -785,6 +794,7 @@ mod tests {
             ("roughdielectric", vec![("alpha", float(0.3))]),
             ("plastic", vec![]),
             ("roughplastic", vec![("distribution", string("ggx"))]),
+            ("pplastic", vec![("alpha", float(0.2))]),
             (
                 "principled",
                 vec![
