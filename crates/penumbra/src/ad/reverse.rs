@@ -141,7 +141,8 @@ pub fn clear_tape() {
 
 /// Propagates adjoints `(output, ∂loss/∂output)` back through the tape and
 /// calls `scatter(param, element, ∂loss/∂param[element])` for every
-/// parameter element read while recording. Clears the tape.
+/// parameter element read while recording whose adjoint is finite and not
+/// zero (a NaN or infinite one is left out). Clears the tape.
 pub fn backward(outputs: &[(Var, f32)], mut scatter: impl FnMut(ParamId, usize, f32)) {
     TAPE.with(|t| {
         let mut guard = t.borrow_mut();

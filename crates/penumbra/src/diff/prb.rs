@@ -34,17 +34,17 @@ use crate::integrator::RenderOptions;
 use crate::params::{ParamId, ParamView, Seeds};
 use crate::scene::Scene;
 use std::borrow::Cow;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::Mutex;
 
 /// Gradients of a loss with respect to scene parameters, shaped like the
 /// parameters.
 #[derive(Clone, Debug, Default)]
 pub struct Gradients {
     pub entries: Vec<GradEntry>,
-    /// Samples left out because their radiance or one of their gradient
-    /// contributions was NaN or infinite (reported once per call with
-    /// [`crate::warn()`]).
+    /// Samples left out because their radiance (or, for a boundary term,
+    /// their value) was NaN or infinite (reported once per call with
+    /// [`crate::warn()`]); a single non-finite element adjoint is dropped
+    /// by [`crate::ad::reverse::backward`].
     pub non_finite_samples: usize,
 }
 
@@ -64,37 +64,85 @@ impl Gradients {
     }
 }
 
-/// Per-tile gradient sums, keyed by (parameter, element) packed as
-/// `parameter << 32 | element`; merged in tile order so the result does
-/// not depend on the thread count.
-type TileGrads = HashMap<u64, f64, BuildHasherDefault<KeyHasher>>;
+/// Elements per page of [`TileSums`] (log2).
+const PAGE_BITS: u32 = 9;
+const PAGE: usize = 1 << PAGE_BITS;
 
-/// The hasher of [`TileGrads`]: the key times an odd constant (Fibonacci
-/// hashing; the table takes its top bits as tags and its low bits, a
-/// bijection of the key's, as the bucket). The default SipHash guards
-/// against keys chosen by an adversary, which these are not; with a
-/// grid's eight voxels per tentative collision it took about a tenth of a
-/// reverse pass through a heterogeneous medium.
-#[derive(Default)]
-struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(self.0.rotate_left(8) ^ b as u64);
-        }
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = v.wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    }
-    fn finish(&self) -> u64 {
-        self.0
-    }
+/// One worker's gradient sums over the tile it traces, one f64 per
+/// (parameter, element), added in the order the samples scatter them: the
+/// same sums a map keyed by element would hold, at the cost of an array
+/// access. The recorded elements are numbered in one flat index space
+/// (`offsets`: where each parameter starts) cut into pages of [`PAGE`]
+/// elements; a page gets its storage when the tile first touches it, so a
+/// worker holds the pages its tile reads (a density grid or a texture may
+/// have millions of elements, a tile's paths touch few of them).
+struct TileSums<'a> {
+    offsets: &'a [usize],
+    /// Per page: 1 + its slot in `values`; 0 if the tile has not touched it.
+    page_slot: Vec<u32>,
+    /// The pages touched, in slot order.
+    pages: Vec<u32>,
+    /// [`PAGE`] sums per slot; all zero between tiles.
+    values: Vec<f64>,
+    /// Whether a value was touched in this tile: an explicit flag, since a
+    /// sum can return to zero.
+    touched_flag: Vec<bool>,
+    /// (parameter, element, index in `values`), in the order first touched.
+    touched: Vec<(u32, u32, usize)>,
 }
 
-/// The gradient contributions of one sample, (parameter, element, value),
-/// kept apart until the sample is known to be finite.
-type SampleGrads = Vec<(u32, u32, f64)>;
+impl<'a> TileSums<'a> {
+    fn new(offsets: &'a [usize]) -> Self {
+        let n = offsets.last().copied().unwrap_or(0);
+        TileSums {
+            offsets,
+            page_slot: vec![0; n.div_ceil(PAGE)],
+            pages: Vec::new(),
+            values: Vec::new(),
+            touched_flag: Vec::new(),
+            touched: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn add(&mut self, id: ParamId, i: usize, g: f64) {
+        let flat = self.offsets[id.0 as usize] + i;
+        let page = flat >> PAGE_BITS;
+        let mut slot = self.page_slot[page] as usize;
+        if slot == 0 {
+            self.pages.push(page as u32);
+            slot = self.pages.len();
+            self.page_slot[page] = slot as u32;
+            if self.values.len() < slot * PAGE {
+                self.values.resize(slot * PAGE, 0.0);
+                self.touched_flag.resize(slot * PAGE, false);
+            }
+        }
+        let k = (slot - 1) * PAGE + (flat & (PAGE - 1));
+        if !self.touched_flag[k] {
+            self.touched_flag[k] = true;
+            self.touched.push((id.0, i as u32, k));
+        }
+        self.values[k] += g;
+    }
+
+    /// The tile's sums, (parameter, element, sum), one per element touched;
+    /// leaves the buffers zero for the next tile.
+    fn take(&mut self) -> Vec<(u32, u32, f64)> {
+        let out = self
+            .touched
+            .drain(..)
+            .map(|(id, i, k)| {
+                self.touched_flag[k] = false;
+                (id, i, std::mem::take(&mut self.values[k]))
+            })
+            .collect();
+        for p in self.pages.drain(..) {
+            self.page_slot[p as usize] = 0;
+        }
+        out
+    }
+}
 
 /// Gradients of a loss with respect to scene parameters, given
 /// `d_image` = ∂loss/∂image (crop-window height × width × 3, row-major,
@@ -241,9 +289,25 @@ fn backward_pass(
 
     // 2. trace every sample on recorded variables and backpropagate its
     //    adjoint radiance
+    // the flat index of each recorded parameter's first element
+    let mut offsets = Vec::with_capacity(scene.params.len() + 1);
+    offsets.push(0);
+    for (id, p) in scene.params.iter() {
+        let n = if store.is_recorded(id) {
+            p.data.len()
+        } else {
+            0
+        };
+        offsets.push(offsets.last().unwrap() + n);
+    }
+    // one TileSums per worker at most, handed from tile to tile
+    let spare = Mutex::new(Vec::<TileSums>::new());
     let tiles = layout.map_tiles(opts, |tile| {
-        let mut grads = TileGrads::default();
-        let mut sample_grads = SampleGrads::new();
+        let mut grads = spare
+            .lock()
+            .unwrap()
+            .pop()
+            .unwrap_or_else(|| TileSums::new(&offsets));
         let mut non_finite = 0usize;
         let mut delta = [0.0f32; 3];
         layout.for_each_sample(tile, |pos, cs, rng| {
@@ -261,20 +325,15 @@ fn backward_pass(
                 clear_tape();
                 return;
             }
-            sample_grads.clear();
+            // `backward` hands over finite values only
             backward(
                 &[(l.x, delta[0]), (l.y, delta[1]), (l.z, delta[2])],
-                |id, i, g| sample_grads.push((id.0, i as u32, g as f64)),
+                |id, i, g| grads.add(id, i, g as f64),
             );
-            if sample_grads.iter().all(|g| g.2.is_finite()) {
-                for &(id, i, g) in &sample_grads {
-                    *grads.entry((id as u64) << 32 | i as u64).or_default() += g;
-                }
-            } else {
-                non_finite += 1;
-            }
         });
-        (grads, non_finite)
+        let sums = grads.take();
+        spare.lock().unwrap().push(grads);
+        (sums, non_finite)
     })?;
     let mut sums: Vec<Vec<f64>> = scene
         .params
@@ -292,8 +351,8 @@ fn backward_pass(
     let mut non_finite = 0;
     for (t, n) in tiles {
         non_finite += n;
-        for (key, g) in t {
-            sums[(key >> 32) as usize][key as u32 as usize] += g;
+        for (id, i, g) in t {
+            sums[id as usize][i as usize] += g;
         }
     }
     report_non_finite("reverse mode", non_finite, &layout);
