@@ -2,7 +2,7 @@
 //! surface uv with bilinear or nearest filtering.
 
 use super::TextureT;
-use crate::ad::Real;
+use crate::ad::{weighted_sum, Real};
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
@@ -242,7 +242,23 @@ impl Bitmap {
                 self.texel(store, self.wrap.wrap(x, w), self.wrap.wrap(y, h))
             }
             FilterType::Bilinear => {
-                let ([xa, xb, ya, yb], fx, fy) = self.bilinear_taps(uv);
+                let (taps, fx, fy) = self.bilinear_taps(uv);
+                if fx.is_const() && fy.is_const() {
+                    // the weights are constants (the uv does not move):
+                    // one weighted read per channel, one tape node each in
+                    // reverse mode instead of a product and a sum per
+                    // texel and channel
+                    let terms = self.bilinear_terms(taps, fx.val(), fy.val());
+                    return if self.channels == 3 {
+                        let channel = |c: usize| {
+                            R::param_sum(store, self.data, &terms.map(|(i, w)| (3 * i + c, w)))
+                        };
+                        V3::new(channel(0), channel(1), channel(2))
+                    } else {
+                        V3::splat(R::param_sum(store, self.data, &terms))
+                    };
+                }
+                let [xa, xb, ya, yb] = taps;
                 let (gx, gy) = (R::cst(1.0) - fx, R::cst(1.0) - fy);
                 let top = self.texel(store, xa, ya) * gx + self.texel(store, xb, ya) * fx;
                 let bottom = self.texel(store, xa, yb) * gx + self.texel(store, xb, yb) * fx;
@@ -251,8 +267,22 @@ impl Bitmap {
         }
     }
 
+    /// The four texels of a bilinear lookup (pixel indices) and their
+    /// weights, for fractional position `(fx, fy)` between the taps
+    /// `[x0, x1, y0, y1]` of [`Bitmap::bilinear_taps`].
+    fn bilinear_terms(&self, [xa, xb, ya, yb]: [usize; 4], fx: f32, fy: f32) -> [(usize, f32); 4] {
+        let (gx, gy) = (1.0 - fx, 1.0 - fy);
+        let w = self.width;
+        [
+            (ya * w + xa, gx * gy),
+            (ya * w + xb, fx * gy),
+            (yb * w + xa, gx * fy),
+            (yb * w + xb, fx * fy),
+        ]
+    }
+
     /// [`Bitmap::lookup`] without derivatives, reading the texels `data`
-    /// directly (the same arithmetic: images are unchanged).
+    /// directly (the same arithmetic as a lookup whose uv does not move).
     fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
         let (w, h) = (self.width, self.height);
         let texel = |x: usize, y: usize| {
@@ -270,11 +300,15 @@ impl Bitmap {
                 texel(self.wrap.wrap(x, w), self.wrap.wrap(y, h))
             }
             FilterType::Bilinear => {
-                let ([xa, xb, ya, yb], fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
-                let (gx, gy) = (1.0 - fx, 1.0 - fy);
-                let top = texel(xa, ya) * gx + texel(xb, ya) * fx;
-                let bottom = texel(xa, yb) * gx + texel(xb, yb) * fx;
-                top * gy + bottom * fy
+                let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
+                let terms = self.bilinear_terms(taps, fx, fy);
+                if self.channels == 3 {
+                    let channel =
+                        |c: usize| weighted_sum(data, &terms.map(|(i, w)| (3 * i + c, w)));
+                    Vec3::new(channel(0), channel(1), channel(2))
+                } else {
+                    Vec3::splat(weighted_sum(data, &terms))
+                }
             }
         }
     }
