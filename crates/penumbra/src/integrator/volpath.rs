@@ -27,7 +27,7 @@
 use super::{mis_weight, survives_roulette, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
-use crate::emitter::{EmitterSample, EmitterT};
+use crate::emitter::{DirectionSample, EmitterSample, EmitterT};
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
@@ -271,15 +271,12 @@ impl VolPathIntegrator {
         // The shadow ray aims at the emitter point from its own origin (off
         // the surface), and stops short of it: aimed along the sampled
         // direction from an offset origin instead, it can meet a curved
-        // emitter (a sphere near its outline) just before the point.
+        // emitter (a sphere near its outline) just before the point. So
+        // does every segment after a surface it passes through.
         let (mut ray, mut medium, es) = match from {
             Vertex::Surface(h, si) => {
                 let es = scene.sample_emitter::<R>(store, si.p, u)?;
-                let ray = if es.ds.dist.is_finite() {
-                    si.spawn_ray_to(es.ds.p)
-                } else {
-                    si.spawn_ray(es.ds.d)
-                };
+                let ray = shadow_ray(si, &es.ds);
                 // leave the surface on the emitter's side, into the medium
                 // there
                 let medium = next_medium(scene, h, si.n.val(), ray.d, medium);
@@ -292,14 +289,10 @@ impl VolPathIntegrator {
                 (ray, medium, es)
             }
         };
-        let d = ray.d;
-        // how far the shadow ray still has to go
-        let mut remaining = ray.tmax;
         let mut tr = Spectrum::<R>::splat(R::cst(1.0));
         loop {
-            ray.tmax = remaining;
             let hit = scene.intersect(&ray);
-            let segment = hit.map_or(remaining, |h| h.t);
+            let segment = hit.map_or(ray.tmax, |h| h.t);
             if let Some(m) = medium {
                 tr = tr.mul_elem(scene.media[m as usize].transmittance(store, &ray, segment, rng));
                 if !R::DIFFERENTIABLE && tr.is_zero() {
@@ -314,15 +307,20 @@ impl VolPathIntegrator {
             }
             let si =
                 scene.surface_interaction::<f32>(&scene.params.primal(), &DiffRay::cst(&ray), &h);
-            let n = si.n.val();
-            medium = next_medium(scene, &h, n, d, medium);
-            let o = si.spawn_ray(d).o;
-            remaining -= (o - ray.o).length();
-            if !(remaining > 0.0) {
-                return Some((es, tr));
-            }
-            ray = Ray::new(o, d);
+            medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
+            ray = shadow_ray(&si, &es.ds);
         }
+    }
+}
+
+/// A shadow ray from the surface point `si` towards the emitter sample
+/// `ds`: to its point, stopping just short, or along its direction for an
+/// emitter at infinity.
+fn shadow_ray<R: Real>(si: &SurfaceInteraction<R>, ds: &DirectionSample) -> Ray {
+    if ds.dist.is_finite() {
+        si.spawn_ray_to(ds.p)
+    } else {
+        si.spawn_ray(ds.d)
     }
 }
 
