@@ -12,10 +12,13 @@
 //! `path`: emission with MIS, next-event estimation, BSDF sampling.
 //! Surfaces with a `null` BSDF are passed through without counting as a
 //! bounce. Next-event estimation from a vertex traces its shadow ray
-//! through null surfaces and multiplies the transmittance of every medium
-//! segment on the way; the emitter-sampling and the phase/BSDF-sampling
-//! strategies are weighted by the power heuristic on their directional
-//! densities, transmittance being part of the integrand (as in Mitsuba).
+//! through surfaces with a pass-through (`NULL`) lobe (null, thin
+//! dielectric, mask) and multiplies the lobes' weights and the
+//! transmittance of every medium segment on the way; the emitter-sampling
+//! and the phase/BSDF-sampling strategies are weighted by the power
+//! heuristic on their directional densities, transmittance being part of
+//! the integrand (as in Mitsuba). A pass-through lobe is no bounce: a path
+//! that samples it goes on even after its last scattering vertex.
 //!
 //! Derivatives: sampled distances, directions and decisions are constants
 //! (detached sampling); the weights of free flights, phase functions,
@@ -210,12 +213,17 @@ impl VolPathIntegrator {
                 hit = scene.intersect(&ray);
                 continue;
             }
-            if depth + 1 >= self.max_depth {
+            // At the last bounce only a pass-through (`NULL` lobe, which is
+            // no bounce) can go on, as in Mitsuba: a path leaving a medium
+            // through a thin dielectric or a mask still reaches what lies
+            // behind it.
+            let last_bounce = depth + 1 >= self.max_depth;
+            if last_bounce && !bsdf.flags().has(BsdfFlags::NULL) {
                 return result;
             }
             bsdf_ctx.set(bsdf, store, &si);
 
-            if bsdf.flags().has(BsdfFlags::SMOOTH) {
+            if !last_bounce && bsdf.flags().has(BsdfFlags::SMOOTH) {
                 let u = rng.next_2d();
                 let from = Vertex::Surface(&h, &si);
                 if let Some((es, tr)) = self.sample_emitter(scene, store, from, medium, u, rng) {
@@ -240,6 +248,9 @@ impl VolPathIntegrator {
             let d = si.to_world(bs.wo).val().normalize();
             medium = next_medium(scene, &h, si.n.val(), d, medium);
             if !bs.lobe.has(BsdfFlags::NULL) {
+                if last_bounce {
+                    return result;
+                }
                 depth += 1;
                 last = LastScatter {
                     p: si.p.val(),
@@ -302,11 +313,21 @@ impl VolPathIntegrator {
             let Some(h) = hit else {
                 return Some((es, tr));
             };
-            if !matches!(scene.shape_bsdf(h.shape), Bsdf::Null(_)) {
+            // surfaces with a pass-through lobe (null, the transmission of
+            // a thin dielectric, a mask's transparency) let the shadow ray
+            // through with that lobe's weight, as Mitsuba's volpath does;
+            // the others stop it
+            let bsdf = scene.shape_bsdf(h.shape);
+            if !bsdf.flags().has(BsdfFlags::NULL) {
                 return None;
             }
-            let si =
-                scene.surface_interaction::<f32>(&scene.params.primal(), &DiffRay::cst(&ray), &h);
+            let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
+            let mut ctx = BsdfContext::empty();
+            ctx.set(bsdf, store, &si);
+            tr = tr.mul_elem(ctx.null_transmission());
+            if !R::DIFFERENTIABLE && tr.is_zero() {
+                return None;
+            }
             medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
             ray = shadow_ray(&si, &es.ds);
         }
