@@ -230,7 +230,10 @@ def cube_mesh():
     for axis in range(3):
         for s in (-1, 1):
             base = len(v)
-            u_ax, w_ax = [a for a in range(3) if a != axis]
+            # (u, w, axis) cyclic: every face wound counter-clockwise seen
+            # from outside, so that the geometric normals point out (media
+            # boundaries and one-sided emitters depend on it)
+            u_ax, w_ax = (axis + 1) % 3, (axis + 2) % 3
             for (a, b) in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
                 p = [0, 0, 0]
                 p[axis], p[u_ax], p[w_ax] = s, a * s, b

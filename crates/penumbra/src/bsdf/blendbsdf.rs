@@ -147,6 +147,12 @@ impl<R: Real> BlendBsdfContext<R> {
         let [b0, b1] = self.nested(this);
         b0.albedo() * (-w + 1.0) + b1.albedo() * w
     }
+
+    pub(crate) fn null_transmission(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        let w = self.weight;
+        let [b0, b1] = self.nested(this);
+        b0.null_transmission() * (-w + 1.0) + b1.null_transmission() * w
+    }
 }
 
 #[cfg(test)]

@@ -112,6 +112,10 @@ impl<R: Real> MaskContext<R> {
     pub(crate) fn albedo(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
         this.at(1).albedo() * self.opacity
     }
+
+    pub(crate) fn null_transmission(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        V3::splat(-self.opacity + 1.0) + this.at(1).null_transmission() * self.opacity
+    }
 }
 
 #[cfg(test)]

@@ -168,6 +168,15 @@ pub trait BsdfContextT<R: Real> {
     fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>>;
     /// The surface's albedo-like colour (for the AOV integrator).
     fn albedo(&self) -> Spectrum<R>;
+    /// The weight of the `NULL` lobe, the light passing straight through
+    /// (Mitsuba's `eval_null_transmission`): what the shadow rays of the
+    /// volumetric path tracer carry through the surface. Their MIS weights
+    /// assume an emitter seen through such a surface can be sampled from
+    /// the vertex before it, as a path sampling the lobe reaches it from
+    /// there. Zero for BSDFs without that lobe.
+    fn null_transmission(&self) -> Spectrum<R> {
+        V3::zero()
+    }
 }
 
 /// The context of one BSDF node at a vertex (mirrors [`Bsdf`]): its
@@ -249,6 +258,9 @@ impl<R: Real> BsdfContextT<R> for BsdfContext<'_, R> {
     fn albedo(&self) -> Spectrum<R> {
         self.root().albedo()
     }
+    fn null_transmission(&self) -> Spectrum<R> {
+        self.root().null_transmission()
+    }
 }
 
 /// One node of a [`BsdfContext`] and the nodes after it, which begin with
@@ -315,6 +327,10 @@ impl<R: Real> BsdfContextT<R> for NestedContext<'_, '_, R> {
     #[inline]
     fn albedo(&self) -> Spectrum<R> {
         dispatch_context!(*self, albedo())
+    }
+    #[inline]
+    fn null_transmission(&self) -> Spectrum<R> {
+        dispatch_context!(*self, null_transmission())
     }
 }
 
@@ -882,6 +898,68 @@ mod tests {
         for (plugin, props) in &all_plugins() {
             let (b, store) = build(plugin, props);
             check_direction_derivatives(&b, &store, 11);
+        }
+    }
+
+    /// The pass-through weights shadow rays carry through a surface, as
+    /// Mitsuba 3.9 (`scalar_rgb`) gives them by `eval_null_transmission`
+    /// at wi = (0.6, 0, 0.8): a thin dielectric's transmission (times
+    /// `specular_transmittance`), a mask's transparency plus its nested
+    /// BSDF's through its opacity, a blend's mixture; none for BSDFs
+    /// without the lobe.
+    #[test]
+    fn null_transmission_matches_mitsuba() {
+        let thin = || nested("b", "bsdf", "thindielectric", &[]);
+        let cases = [
+            ("null", vec![], Vec3::ONE),
+            ("thindielectric", vec![], Vec3::splat(0.91488)),
+            (
+                "thindielectric",
+                vec![
+                    ("specular_transmittance", rgb(0.5, 0.2, 1.0)),
+                    ("specular_reflectance", float(0.3)),
+                ],
+                Vec3::new(0.45744, 0.182976, 0.91488),
+            ),
+            (
+                "mask",
+                vec![
+                    ("opacity", float(0.3)),
+                    ("bsdf", nested("b", "bsdf", "diffuse", &[])),
+                ],
+                Vec3::splat(0.7),
+            ),
+            (
+                "mask",
+                vec![("opacity", float(0.3)), ("bsdf", thin())],
+                Vec3::splat(0.974464),
+            ),
+            (
+                "blendbsdf",
+                vec![
+                    ("weight", float(0.3)),
+                    ("a", thin()),
+                    ("b", nested("b", "b2", "diffuse", &[])),
+                ],
+                Vec3::splat(0.640416),
+            ),
+            ("dielectric", vec![], Vec3::ZERO),
+            (
+                "principledthin",
+                vec![("spec_trans", float(0.5))],
+                Vec3::ZERO,
+            ),
+        ];
+        for (plugin, props, want) in cases {
+            let (b, store) = build(plugin, &props);
+            let got = b
+                .context(&store.primal(), &si::<f32>(dir(0.8, 0.0)))
+                .null_transmission()
+                .val();
+            assert!(
+                (got - want).abs().max_element() < 1e-5,
+                "{plugin} {props:?}: {got}, Mitsuba {want}"
+            );
         }
     }
 }

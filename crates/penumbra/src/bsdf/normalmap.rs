@@ -234,6 +234,12 @@ impl<R: Real> PerturbedFrameContext<R> {
     pub(crate) fn albedo(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
         this.at(1).albedo()
     }
+
+    /// None, as in Mitsuba 3, whose `normalmap` and `bumpmap` do not pass
+    /// the nested BSDF's on: shadow rays stop at them.
+    pub(crate) fn null_transmission(&self, _: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        V3::zero()
+    }
 }
 
 #[cfg(test)]

@@ -58,6 +58,9 @@ impl<R: Real> BsdfContextT<R> for NullContext<R> {
     fn albedo(&self) -> Spectrum<R> {
         V3::zero()
     }
+    fn null_transmission(&self) -> Spectrum<R> {
+        V3::splat(R::cst(1.0))
+    }
 }
 
 #[cfg(test)]

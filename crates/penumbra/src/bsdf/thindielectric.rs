@@ -4,7 +4,7 @@
 
 use super::fresnel::fresnel_dielectric;
 use super::{
-    default_albedo, eta_props, eval_factor, sample_reflect_or_transmit, scalar_param,
+    default_albedo, eta_props, eval_factor, modulate, sample_reflect_or_transmit, scalar_param,
     specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
@@ -87,10 +87,7 @@ impl<R: Real> BsdfContextT<R> for ThinDielectricContext<R> {
         0.0
     }
     fn sample(&self, u1: f32, _u2: Vec2) -> Option<BsdfSample<R>> {
-        let (mut f, ..) = fresnel_dielectric(self.wi.z.abs(), self.eta);
-        if f.val() < 1.0 {
-            f = f * 2.0 / (f + 1.0);
-        }
+        let f = self.reflectance();
         sample_reflect_or_transmit(
             self.wi,
             f,
@@ -102,6 +99,24 @@ impl<R: Real> BsdfContextT<R> for ThinDielectricContext<R> {
     }
     fn albedo(&self) -> Spectrum<R> {
         default_albedo(self)
+    }
+    fn null_transmission(&self) -> Spectrum<R> {
+        modulate(
+            V3::splat(-self.reflectance() + 1.0),
+            self.specular_transmittance,
+        )
+    }
+}
+
+impl<R: Real> ThinDielectricContext<R> {
+    /// `R'`, the reflectance with the internal bounces.
+    fn reflectance(&self) -> R {
+        let (f, ..) = fresnel_dielectric(self.wi.z.abs(), self.eta);
+        if f.val() < 1.0 {
+            f * 2.0 / (f + 1.0)
+        } else {
+            f
+        }
     }
 }
 

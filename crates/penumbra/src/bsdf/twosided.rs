@@ -150,6 +150,13 @@ impl TwoSidedContext {
     pub(crate) fn albedo<R: Real>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
         this.at(1).albedo()
     }
+
+    pub(crate) fn null_transmission<R: Real>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+        match self.side {
+            Side::Front | Side::Back => this.at(1).null_transmission(),
+            Side::Edge => V3::zero(),
+        }
+    }
 }
 
 #[cfg(test)]

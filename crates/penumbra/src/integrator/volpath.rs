@@ -12,10 +12,13 @@
 //! `path`: emission with MIS, next-event estimation, BSDF sampling.
 //! Surfaces with a `null` BSDF are passed through without counting as a
 //! bounce. Next-event estimation from a vertex traces its shadow ray
-//! through null surfaces and multiplies the transmittance of every medium
-//! segment on the way; the emitter-sampling and the phase/BSDF-sampling
-//! strategies are weighted by the power heuristic on their directional
-//! densities, transmittance being part of the integrand (as in Mitsuba).
+//! through surfaces with a pass-through (`NULL`) lobe (null, thin
+//! dielectric, mask) and multiplies the lobes' weights and the
+//! transmittance of every medium segment on the way; the emitter-sampling
+//! and the phase/BSDF-sampling strategies are weighted by the power
+//! heuristic on their directional densities, transmittance being part of
+//! the integrand (as in Mitsuba). A pass-through lobe is no bounce: a path
+//! that samples it goes on even after its last scattering vertex.
 //!
 //! Derivatives: sampled distances, directions and decisions are constants
 //! (detached sampling); the weights of free flights, phase functions,
@@ -27,7 +30,7 @@
 use super::{mis_weight, survives_roulette, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
-use crate::emitter::{EmitterSample, EmitterT};
+use crate::emitter::{DirectionSample, EmitterSample, EmitterT};
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
@@ -210,12 +213,17 @@ impl VolPathIntegrator {
                 hit = scene.intersect(&ray);
                 continue;
             }
-            if depth + 1 >= self.max_depth {
+            // At the last bounce only a pass-through (`NULL` lobe, which is
+            // no bounce) can go on, as in Mitsuba: a path leaving a medium
+            // through a thin dielectric or a mask still reaches what lies
+            // behind it.
+            let last_bounce = depth + 1 >= self.max_depth;
+            if last_bounce && !bsdf.flags().has(BsdfFlags::NULL) {
                 return result;
             }
             bsdf_ctx.set(bsdf, store, &si);
 
-            if bsdf.flags().has(BsdfFlags::SMOOTH) {
+            if !last_bounce && bsdf.flags().has(BsdfFlags::SMOOTH) {
                 let u = rng.next_2d();
                 let from = Vertex::Surface(&h, &si);
                 if let Some((es, tr)) = self.sample_emitter(scene, store, from, medium, u, rng) {
@@ -240,6 +248,9 @@ impl VolPathIntegrator {
             let d = si.to_world(bs.wo).val().normalize();
             medium = next_medium(scene, &h, si.n.val(), d, medium);
             if !bs.lobe.has(BsdfFlags::NULL) {
+                if last_bounce {
+                    return result;
+                }
                 depth += 1;
                 last = LastScatter {
                     p: si.p.val(),
@@ -271,15 +282,12 @@ impl VolPathIntegrator {
         // The shadow ray aims at the emitter point from its own origin (off
         // the surface), and stops short of it: aimed along the sampled
         // direction from an offset origin instead, it can meet a curved
-        // emitter (a sphere near its outline) just before the point.
+        // emitter (a sphere near its outline) just before the point. So
+        // does every segment after a surface it passes through.
         let (mut ray, mut medium, es) = match from {
             Vertex::Surface(h, si) => {
                 let es = scene.sample_emitter::<R>(store, si.p, u)?;
-                let ray = if es.ds.dist.is_finite() {
-                    si.spawn_ray_to(es.ds.p)
-                } else {
-                    si.spawn_ray(es.ds.d)
-                };
+                let ray = shadow_ray(si, &es.ds);
                 // leave the surface on the emitter's side, into the medium
                 // there
                 let medium = next_medium(scene, h, si.n.val(), ray.d, medium);
@@ -292,14 +300,10 @@ impl VolPathIntegrator {
                 (ray, medium, es)
             }
         };
-        let d = ray.d;
-        // how far the shadow ray still has to go
-        let mut remaining = ray.tmax;
         let mut tr = Spectrum::<R>::splat(R::cst(1.0));
         loop {
-            ray.tmax = remaining;
             let hit = scene.intersect(&ray);
-            let segment = hit.map_or(remaining, |h| h.t);
+            let segment = hit.map_or(ray.tmax, |h| h.t);
             if let Some(m) = medium {
                 tr = tr.mul_elem(scene.media[m as usize].transmittance(store, &ray, segment, rng));
                 if !R::DIFFERENTIABLE && tr.is_zero() {
@@ -309,20 +313,35 @@ impl VolPathIntegrator {
             let Some(h) = hit else {
                 return Some((es, tr));
             };
-            if !matches!(scene.shape_bsdf(h.shape), Bsdf::Null(_)) {
+            // surfaces with a pass-through lobe (null, the transmission of
+            // a thin dielectric, a mask's transparency) let the shadow ray
+            // through with that lobe's weight, as Mitsuba's volpath does;
+            // the others stop it
+            let bsdf = scene.shape_bsdf(h.shape);
+            if !bsdf.flags().has(BsdfFlags::NULL) {
                 return None;
             }
-            let si =
-                scene.surface_interaction::<f32>(&scene.params.primal(), &DiffRay::cst(&ray), &h);
-            let n = si.n.val();
-            medium = next_medium(scene, &h, n, d, medium);
-            let o = si.spawn_ray(d).o;
-            remaining -= (o - ray.o).length();
-            if !(remaining > 0.0) {
-                return Some((es, tr));
+            let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
+            let mut ctx = BsdfContext::empty();
+            ctx.set(bsdf, store, &si);
+            tr = tr.mul_elem(ctx.null_transmission());
+            if !R::DIFFERENTIABLE && tr.is_zero() {
+                return None;
             }
-            ray = Ray::new(o, d);
+            medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
+            ray = shadow_ray(&si, &es.ds);
         }
+    }
+}
+
+/// A shadow ray from the surface point `si` towards the emitter sample
+/// `ds`: to its point, stopping just short, or along its direction for an
+/// emitter at infinity.
+fn shadow_ray<R: Real>(si: &SurfaceInteraction<R>, ds: &DirectionSample) -> Ray {
+    if ds.dist.is_finite() {
+        si.spawn_ray_to(ds.p)
+    } else {
+        si.spawn_ray(ds.d)
     }
 }
 
