@@ -7,7 +7,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{Class, LoadContext, Node};
+use crate::scene::description::{Class, LoadContext, Node};
 use crate::texture::{Bitmap, Texture};
 
 /// Bump mapping: the surface is displaced along the shading normal by
@@ -123,7 +123,7 @@ mod tests {
     use crate::image::{write_image, Image};
     use crate::math::V3;
     use crate::params::{ParamStore, Seeds};
-    use crate::scene::{Class, LoadContext, Node, Prop, Value};
+    use crate::scene::description::{Class, LoadContext, Node, Prop, Value};
     use glam::Vec3;
     use std::rc::Rc;
 

@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 

@@ -6,7 +6,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;

@@ -10,7 +10,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -122,7 +122,7 @@ impl<R: Real> MaskContext<R> {
 mod tests {
     use super::super::test_util::*;
     use super::super::{Bsdf, BsdfContextT, BsdfFlags};
-    use crate::scene::LoadContext;
+    use crate::scene::description::LoadContext;
 
     #[test]
     fn opacity_splits_samples() {

@@ -16,7 +16,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::V3;
 use crate::params::{Domain, ParamView};
-use crate::scene::{LoadContext, Node, Value};
+use crate::scene::description::{LoadContext, Node, Value};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f64::consts::PI as PI64;

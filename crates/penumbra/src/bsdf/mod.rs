@@ -54,9 +54,10 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{Class, LoadContext, Node, Prop, Value};
+use crate::scene::description::{Class, LoadContext, Node, Prop, Value};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
+use std::collections::HashMap;
 use std::rc::Rc;
 
 /// Which lobes a BSDF has, or which lobe a sample came from.
@@ -356,6 +357,12 @@ pub enum Bsdf {
     BumpMap(BumpMap),
 }
 
+/// The BSDFs built from nodes with an id while a scene loads, which may
+/// be referenced from several places: built once, then shared (their
+/// parameters exist once in the store).
+#[derive(Default)]
+struct SharedBsdfs(HashMap<*const Node, Bsdf>);
+
 /// The plugin names [`Bsdf::from_node`] knows.
 pub const BSDF_PLUGINS: &[&str] = &[
     "diffuse",
@@ -425,7 +432,7 @@ impl Bsdf {
     /// every parameter of every node it built was used.
     pub fn from_node(node: &Node, ctx: &mut LoadContext) -> Result<Bsdf> {
         let shared = node.id.is_some().then_some(node as *const Node);
-        if let Some(b) = shared.and_then(|p| ctx.shared_bsdfs.get(&p)) {
+        if let Some(b) = shared.and_then(|p| ctx.state::<SharedBsdfs>().0.get(&p)) {
             return Ok(b.clone());
         }
         let mut b = match node.plugin.as_str() {
@@ -462,7 +469,7 @@ impl Bsdf {
         }
         b.parameters_changed(&ctx.store);
         if let Some(p) = shared {
-            ctx.shared_bsdfs.insert(p, b.clone());
+            ctx.state::<SharedBsdfs>().0.insert(p, b.clone());
         }
         Ok(b)
     }

@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Frame, Spectrum, V3};
 use crate::params::{Domain, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -249,7 +249,7 @@ mod tests {
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::LoadContext;
+    use crate::scene::description::LoadContext;
     use crate::texture::TextureT;
     use glam::Vec3;
 

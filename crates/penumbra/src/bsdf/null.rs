@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::ParamView;
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// Null BSDF: a `NULL` lobe with `wo = −wi` and weight 1; no parameters.

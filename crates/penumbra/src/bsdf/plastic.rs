@@ -14,7 +14,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -220,7 +220,7 @@ mod tests {
 
     #[test]
     fn sampling_matches_pdf_and_lobes() {
-        let cases: Vec<Vec<(&str, crate::scene::Value)>> = vec![
+        let cases: Vec<Vec<(&str, crate::scene::description::Value)>> = vec![
             vec![],
             vec![
                 ("diffuse_reflectance", rgb(0.1, 0.3, 0.7)),

@@ -26,7 +26,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -232,7 +232,7 @@ mod tests {
     use crate::ad::Dual;
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
     use glam::Vec3;
 
     #[test]

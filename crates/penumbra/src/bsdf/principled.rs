@@ -32,7 +32,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamView};
-use crate::scene::{LoadContext, Node, Value};
+use crate::scene::description::{LoadContext, Node, Value};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
@@ -643,7 +643,7 @@ mod tests {
     use super::*;
     use crate::ad::Dual;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     /// Case A: every reflection lobe (metallic, tinted specular,
     /// anisotropy, sheen, clearcoat, flatness); case B: transmission.

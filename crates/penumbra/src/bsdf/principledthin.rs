@@ -25,7 +25,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -342,7 +342,7 @@ mod tests {
     use super::*;
     use crate::ad::Dual;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     /// Case A: every lobe, transmission included; case B: the defaults
     /// but for a base colour and roughness (no transmission).

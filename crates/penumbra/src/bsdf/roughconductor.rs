@@ -14,7 +14,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::ParamView;
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -140,7 +140,7 @@ mod tests {
 
     #[test]
     fn sampling_matches_pdf() {
-        let configs: Vec<Vec<(&str, crate::scene::Value)>> = vec![
+        let configs: Vec<Vec<(&str, crate::scene::description::Value)>> = vec![
             vec![("distribution", string("ggx")), ("alpha", float(0.2))],
             vec![("alpha", float(0.3))],
             vec![

@@ -13,7 +13,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -216,7 +216,7 @@ mod tests {
     use super::super::BsdfContextT;
     use crate::ad::Dual;
     use crate::math::V3;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     #[test]
     fn sampling_matches_pdf_both_sides() {

@@ -21,7 +21,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -372,7 +372,7 @@ mod tests {
     use super::*;
     use crate::ad::Dual;
     use crate::math::V3;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     #[test]
     fn gauss_legendre_integrates_polynomials() {

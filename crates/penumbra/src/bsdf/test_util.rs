@@ -10,7 +10,7 @@ use crate::geometry::SurfaceInteraction;
 use crate::math::warp::square_to_uniform_sphere;
 use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::ParamStore;
-use crate::scene::{Class, LoadContext, Node, Prop, Value};
+use crate::scene::description::{Class, LoadContext, Node, Prop, Value};
 use crate::testing::{Chi2Test, Pcg32};
 use glam::Vec3;
 use std::rc::Rc;

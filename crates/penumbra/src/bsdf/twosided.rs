@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// Two-sided wrapper: one nested BSDF used on both sides, or two (front,
@@ -163,7 +163,7 @@ impl TwoSidedContext {
 mod tests {
     use super::super::test_util::*;
     use super::super::{Bsdf, BsdfContextT};
-    use crate::scene::LoadContext;
+    use crate::scene::description::LoadContext;
 
     #[test]
     fn both_sides_and_keys() {

@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
 use crate::params::{ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -170,7 +170,7 @@ mod tests {
     use crate::emitter::{surface_si, Emitter};
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
     use crate::testing::Chi2Test;
 
     /// A 2 × 3 rectangle centred at (0, 0, 1) facing −z, sampled uniformly

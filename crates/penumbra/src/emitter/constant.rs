@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{warp, Spectrum, V3};
 use crate::params::{ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -88,7 +88,7 @@ mod tests {
     use crate::emitter::EmitterSample;
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
     use crate::testing::Chi2Test;
     use std::f32::consts::PI;
 

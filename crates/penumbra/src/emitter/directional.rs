@@ -8,7 +8,7 @@ use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
 use crate::params::ParamView;
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -74,7 +74,7 @@ mod tests {
     use crate::emitter::Emitter;
     use crate::emitter::EmitterSample;
     use crate::math::V3;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     #[test]
     fn light_comes_from_minus_direction() {

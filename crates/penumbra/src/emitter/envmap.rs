@@ -8,7 +8,7 @@ use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
 use crate::math::{Distribution2D, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -270,7 +270,7 @@ mod tests {
     use crate::emitter::EmitterSample;
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
     use crate::testing::Chi2Test;
     use glam::{Mat4, Vec4};
 

@@ -22,7 +22,7 @@ use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{Frame, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -446,7 +446,7 @@ impl Emitter {
 pub(crate) mod test_util {
     use super::*;
     use crate::error::SrcLoc;
-    use crate::scene::{Class, Prop, Value};
+    use crate::scene::description::{Class, Prop, Value};
 
     /// An `<emitter>` node with the given properties at `test.xml:1`.
     pub fn node(plugin: &str, key: &str, props: Vec<(&str, Value)>) -> Node {

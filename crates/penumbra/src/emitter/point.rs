@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
 use crate::params::{Domain, ParamFlags, ParamId, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -71,7 +71,7 @@ mod tests {
     use crate::emitter::EmitterSample;
     use crate::math::V3;
     use crate::params::Seeds;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     #[test]
     fn inverse_square_falloff_and_differentiable_intensity() {

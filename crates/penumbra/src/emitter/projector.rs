@@ -10,7 +10,7 @@ use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::{Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -119,7 +119,7 @@ mod tests {
     use super::*;
     use crate::emitter::test_util::node;
     use crate::emitter::Emitter;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
     use std::f32::consts::TAU;
 
     /// Mitsuba 3.9.1's `sample_direction` weights (scalar_rgb) of a

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::{Transform, V2, V3};
 use crate::params::{Domain, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -133,7 +133,7 @@ mod tests {
     use crate::emitter::Emitter;
     use crate::emitter::EmitterSample;
     use crate::math::V3;
-    use crate::scene::Value;
+    use crate::scene::description::Value;
 
     /// Mitsuba 3.9.1's weights for a unit-intensity spot (cutoff 20°,
     /// beam 10°) seen from distance 2 at these angles off its axis.

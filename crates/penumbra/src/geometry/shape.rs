@@ -8,7 +8,7 @@ use crate::geometry::mesh::Mesh;
 use crate::geometry::shapes::{self, Cylinder, Disk, Sphere};
 use crate::geometry::{DiffRay, Hit, PositionSample, SurfaceInteraction};
 use crate::params::{ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// What every shape plugin provides.
@@ -274,7 +274,7 @@ mod tests {
     use crate::geometry::{DiffRay, Ray};
     use crate::math::Transform;
     use crate::params::Seeds;
-    use crate::scene::{Class, Prop, Value};
+    use crate::scene::description::{Class, Prop, Value};
     use glam::{Mat4, Vec3};
     use std::f32::consts::PI;
     use std::rc::Rc;

@@ -16,7 +16,7 @@ use crate::geometry::Ray;
 use crate::math::{Spectrum, V3};
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
-use crate::scene::{Node, Value};
+use crate::scene::description::{Node, Value};
 
 /// A homogeneous medium's coefficients must be constants: refuses a
 /// volume other than `constvolume` before it is built.

@@ -28,7 +28,7 @@ use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::phase::PhaseFunction;
 use crate::sampler::SampleStream;
-use crate::scene::{Class, LoadContext, Node};
+use crate::scene::description::{Class, LoadContext, Node};
 use crate::volume::Volume;
 use glam::Vec3;
 use majorant::{MajorantGrid, Walk};

@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::math::{Frame, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -76,7 +76,7 @@ impl HenyeyGreenstein {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Class, Value};
+    use crate::scene::description::{Class, Value};
     use crate::texture::test_node;
 
     fn hg(g: f32) -> (HenyeyGreenstein, ParamStore) {

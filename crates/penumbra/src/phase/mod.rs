@@ -15,7 +15,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::math::V3;
 use crate::params::{ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// All phase-function plugins.

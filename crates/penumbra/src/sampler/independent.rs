@@ -2,7 +2,7 @@
 
 use super::{mix64, to_unit};
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 
 /// Uncorrelated uniform random numbers.
 #[derive(Clone, Debug)]

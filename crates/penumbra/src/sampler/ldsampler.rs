@@ -12,7 +12,7 @@
 
 use super::{mix64, permute, round_up_warning};
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// Scrambled (0,2)-sequence samples; the sample count is rounded up to a

@@ -15,7 +15,7 @@ pub use orthogonal::Orthogonal;
 pub use stratified::Stratified;
 
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// All sampler plugins.

@@ -14,7 +14,7 @@
 
 use super::{independent::uniform, mix64, permute, round_up_warning};
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// Correlated multi-jittered samples; the sample count is rounded up to a

@@ -15,7 +15,7 @@
 
 use super::{independent::uniform, mix64, permute, round_up_warning};
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 
 /// Orthogonal-array samples of strength 2; the sample count is rounded up
 /// to the square of a prime.

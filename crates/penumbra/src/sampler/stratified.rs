@@ -7,7 +7,7 @@
 
 use super::{independent::uniform, mix64, permute};
 use crate::error::Result;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// Jittered stratified samples; the sample count is rounded up to a square.

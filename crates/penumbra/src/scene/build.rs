@@ -12,7 +12,7 @@ use crate::integrator::{Integrator, PathIntegrator};
 use crate::math::DiscreteDistribution;
 use crate::medium::Medium;
 use crate::sensor::Sensor;
-use crate::texture::MeshAttribute;
+use crate::texture::{AttributeUses, MeshAttribute};
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 
@@ -58,7 +58,7 @@ impl Builder {
         node.check_all_used()?;
         self.bsdfs.push(b);
         self.bsdf_attribute_uses
-            .push(std::mem::take(&mut self.ctx.attribute_uses));
+            .push(std::mem::take(&mut self.ctx.state::<AttributeUses>().0));
         Ok(self.bsdfs.len() as u32 - 1)
     }
 
@@ -305,7 +305,7 @@ impl Builder {
         let exterior = self.shape_medium(node, "exterior")?;
         node.check_all_used()?;
         // the area emitter's textures are evaluated on this shape too
-        let emitter_uses = std::mem::take(&mut self.ctx.attribute_uses);
+        let emitter_uses = std::mem::take(&mut self.ctx.state::<AttributeUses>().0);
         for t in self.bsdf_attribute_uses[bsdf as usize]
             .iter()
             .chain(&emitter_uses)
@@ -335,10 +335,7 @@ impl Scene {
     pub fn from_description(desc: &SceneDescription) -> Result<Scene> {
         let root = &*desc.root;
         let mut b = Builder {
-            ctx: LoadContext {
-                resolver: desc.resolver.clone(),
-                ..LoadContext::default()
-            },
+            ctx: LoadContext::new(desc.resolver.clone()),
             bsdfs: Vec::new(),
             bsdf_attribute_uses: Vec::new(),
             bsdf_of_node: HashMap::new(),
@@ -373,7 +370,7 @@ impl Scene {
                 Class::Emitter if node.plugin == "area" => top_level_areas.push(node),
                 Class::Emitter => {
                     b.emitter(&node, None)?;
-                    if let Some(t) = b.ctx.attribute_uses.first() {
+                    if let Some(t) = b.ctx.state::<AttributeUses>().0.first() {
                         return Err(t.outside_mesh_error());
                     }
                 }

@@ -1,63 +1,17 @@
 //! Scenes: the scene description ([`description`], below the plugins: it
-//! imports none), the [`LoadContext`] plugins are built with, and the
-//! assembly (`build.rs`, above the plugins) of the [`Scene`] that
-//! integrators render.
+//! imports none; the [`LoadContext`] plugins are built with is part of
+//! it), and the assembly (`build.rs`, above the plugins) of the [`Scene`]
+//! that integrators render.
 
 pub mod description;
 
 pub use description::{
-    child_key, parse_file, parse_str, Class, FileResolver, Node, Prop, SceneDescription, Value,
+    child_key, parse_file, parse_str, Class, FileResolver, LoadContext, Node, Prop,
+    SceneDescription, Value,
 };
 
 use crate::error::{Error, Result};
 use crate::params::{ParamStore, ParamView};
-use crate::texture::Texture;
-use std::collections::HashMap;
-use std::path::PathBuf;
-
-/// State shared by plugin constructors while a scene is built.
-#[derive(Debug, Default)]
-pub struct LoadContext {
-    /// Where constructors register their parameters.
-    pub store: ParamStore,
-    /// BSDFs and textures built from nodes with an id, which may be
-    /// referenced from several places: built once, then shared (their
-    /// parameters exist once in the store).
-    pub(crate) shared_bsdfs: HashMap<*const Node, Bsdf>,
-    pub(crate) shared_textures: HashMap<*const Node, Texture>,
-    /// `mesh_attribute` textures built (or reused) since the builder last
-    /// took them: it checks them against the shape they are used on.
-    pub(crate) attribute_uses: Vec<crate::texture::MeshAttribute>,
-    /// Where relative file names are searched (the main scene file's
-    /// folder and `<path>`s; see [`FileResolver`]).
-    pub resolver: FileResolver,
-}
-
-impl LoadContext {
-    /// Finds `filename` (parameter `prop` of `node`) with the scene's file
-    /// resolver; errors, naming the folders searched, if it does not exist.
-    pub fn resolve_path(&self, node: &Node, prop: &str, filename: &str) -> Result<PathBuf> {
-        self.resolver
-            .resolve(filename)
-            .filter(|p| p.is_file())
-            .ok_or_else(|| {
-                node.prop(prop).map_or_else(
-                    || node.error(format!("file '{filename}' not found")),
-                    |p| {
-                        node.prop_error(
-                            p,
-                            format!(
-                                "file '{filename}' not found (looked in: {}); declare its \
-                                 folder with <path value=\"...\"/> or give its path relative to \
-                                 the scene file",
-                                self.resolver.describe()
-                            ),
-                        )
-                    },
-                )
-            })
-    }
-}
 
 mod build;
 

@@ -18,7 +18,7 @@ use crate::image::{Film, ReconstructionFilter};
 use crate::math::{Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::sampler::{Independent, Sampler};
-use crate::scene::{Class, Node};
+use crate::scene::description::{Class, Node};
 use glam::{Mat4, Vec2};
 
 /// The camera models.

@@ -8,7 +8,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::math::V3;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::{Vec2, Vec3};
 
 #[derive(Clone, Debug)]

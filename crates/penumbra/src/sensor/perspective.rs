@@ -8,7 +8,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::params::ParamStore;
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// A pinhole camera looking down its local +z.

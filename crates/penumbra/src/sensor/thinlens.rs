@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::math::{warp, V3};
 use crate::params::{Domain, ParamId, ParamStore, ParamView};
-use crate::scene::Node;
+use crate::scene::description::Node;
 use glam::Vec2;
 
 /// A thin lens of radius `aperture_radius` focused at `focus_distance`.

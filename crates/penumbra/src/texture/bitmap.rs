@@ -9,7 +9,7 @@ use crate::image::Image;
 use crate::image::{read_image, srgb_to_linear};
 use crate::math::{Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// Texel filter of a bitmap lookup (`filter_type`).
@@ -398,7 +398,7 @@ mod tests {
     use super::*;
     use crate::ad::Dual;
     use crate::params::Seeds;
-    use crate::scene::{Class, Value};
+    use crate::scene::description::{Class, Value};
     use crate::texture::{si_at_uv, test_node, Texture};
     use glam::Vec3;
 

@@ -8,7 +8,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 
 /// Mitsuba 3.9.1's checkerboard `eval_1` returns `color1` where `eval`
 /// returns `color0` and vice versa (observed: default colours at uv =
@@ -88,7 +88,7 @@ impl TextureT for Checkerboard {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Class, Value};
+    use crate::scene::description::{Class, Value};
     use crate::texture::{si_at_uv, test_node};
 
     /// A checkerboard with distinct RGB colours and

@@ -9,7 +9,7 @@ use crate::geometry::mesh::AttributeParam;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
 use crate::params::{ParamStore, ParamView};
-use crate::scene::Node;
+use crate::scene::description::Node;
 
 /// Parameters: `name` (`vertex_...` or `face_...`), `scale` (1). Vertex
 /// attributes are interpolated with the hit's barycentrics, face
@@ -282,10 +282,13 @@ mod tests {
             "{e}"
         );
         let n = super::super::test_node(
-            crate::scene::Class::Texture,
+            crate::scene::description::Class::Texture,
             "mesh_attribute",
             "t",
-            vec![("name", crate::scene::Value::Str("color".into()))],
+            vec![(
+                "name",
+                crate::scene::description::Value::Str("color".into()),
+            )],
         );
         let e = MeshAttribute::from_node(&n).unwrap_err().to_string();
         assert!(

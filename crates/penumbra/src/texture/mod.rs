@@ -19,7 +19,8 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node, Value};
+use crate::scene::description::{LoadContext, Node, Value};
+use std::collections::HashMap;
 
 /// What every texture plugin provides.
 pub trait TextureT {
@@ -89,6 +90,17 @@ pub enum Channels {
     Rgb,
 }
 
+/// The textures built from nodes with an id while a scene loads, shared
+/// by every use (their parameters exist once in the store).
+#[derive(Default)]
+struct SharedTextures(HashMap<*const Node, Texture>);
+
+/// The `mesh_attribute` textures built (or reused) since the scene's
+/// builder last took them: it checks them against the shape they are used
+/// on.
+#[derive(Default)]
+pub(crate) struct AttributeUses(pub(crate) Vec<MeshAttribute>);
+
 impl Texture {
     /// The texture for property `name` of `node`: a nested `<texture>`, a
     /// reference to one, or a plain value (`<float>`, `<rgb>`,
@@ -135,19 +147,19 @@ impl Texture {
     /// its first use.
     pub fn from_node(node: &Node, domain: Domain, ctx: &mut LoadContext) -> Result<Texture> {
         let shared = node.id.is_some().then_some(node as *const Node);
-        let t = match shared.and_then(|p| ctx.shared_textures.get(&p)) {
+        let t = match shared.and_then(|p| ctx.state::<SharedTextures>().0.get(&p)) {
             Some(t) => t.clone(),
             None => {
                 let t = Texture::new(node, domain, ctx)?;
                 if let Some(p) = shared {
-                    ctx.shared_textures.insert(p, t.clone());
+                    ctx.state::<SharedTextures>().0.insert(p, t.clone());
                 }
                 t
             }
         };
         // every use, shared or not: the builder checks each shape using it
         if let Texture::MeshAttribute(m) = &t {
-            ctx.attribute_uses.push(m.clone());
+            ctx.state::<AttributeUses>().0.push(m.clone());
         }
         Ok(t)
     }
@@ -196,7 +208,7 @@ pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
 /// A node with the given properties, declared at `test.xml:1`.
 #[cfg(test)]
 pub(crate) fn test_node(
-    class: crate::scene::Class,
+    class: crate::scene::description::Class,
     plugin: &str,
     key: &str,
     props: Vec<(&str, Value)>,
@@ -208,7 +220,8 @@ pub(crate) fn test_node(
     };
     let mut n = Node::new(class, plugin, Some(key.into()), key.into(), loc.clone());
     for (name, v) in props {
-        n.props.push(crate::scene::Prop::new(name, v, loc.clone()));
+        n.props
+            .push(crate::scene::description::Prop::new(name, v, loc.clone()));
     }
     n
 }

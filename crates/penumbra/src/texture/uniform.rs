@@ -6,7 +6,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::LoadContext;
+use crate::scene::description::LoadContext;
 use glam::Vec3;
 
 /// A spatially constant value, stored as parameter `<key>.value` with one

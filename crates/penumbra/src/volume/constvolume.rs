@@ -5,7 +5,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node, Value};
+use crate::scene::description::{LoadContext, Node, Value};
 use crate::texture::{Channels, TextureT, Uniform};
 use glam::Vec3;
 

@@ -8,7 +8,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::math::{Spectrum, Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::Vec3;
 use std::path::Path;
 

@@ -14,7 +14,7 @@ use crate::ad::Real;
 use crate::error::Result;
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node, Value};
+use crate::scene::description::{LoadContext, Node, Value};
 use glam::Vec3;
 
 /// All volume plugins.

@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 

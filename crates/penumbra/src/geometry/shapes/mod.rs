@@ -20,7 +20,7 @@ use crate::error::Result;
 use crate::geometry::mesh::MeshOptions;
 use crate::geometry::{Hit, SurfaceInteraction};
 use crate::math::{Frame, V2, V3};
-use crate::scene::Node;
+use crate::scene::description::Node;
 use std::f32::consts::PI;
 
 /// `face_normals` and `flip_normals` of a mesh plugin.
@@ -32,7 +32,10 @@ pub(crate) fn mesh_options(node: &Node) -> Result<MeshOptions> {
 }
 
 /// The required `filename` parameter, resolved relative to the scene file.
-pub(crate) fn filename(node: &Node, ctx: &crate::scene::LoadContext) -> Result<std::path::PathBuf> {
+pub(crate) fn filename(
+    node: &Node,
+    ctx: &crate::scene::description::LoadContext,
+) -> Result<std::path::PathBuf> {
     let f = node
         .string_opt("filename")?
         .ok_or_else(|| node.error("missing required parameter 'filename'"))?;

@@ -4,7 +4,7 @@
 
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 
 /// Builds the mesh of a `<shape type="obj">` node.
 pub fn load(node: &Node, ctx: &mut LoadContext) -> Result<Mesh> {

@@ -8,7 +8,7 @@
 
 use crate::error::Result;
 use crate::geometry::mesh::{Mesh, MeshData, MeshOptions};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
 
 /// Object-space data of the rectangle (counter-clockwise seen from +z).

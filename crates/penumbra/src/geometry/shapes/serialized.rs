@@ -8,7 +8,7 @@
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::serialized::load_serialized;
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 
 /// Builds the mesh of a `<shape type="serialized">` node.
 pub fn load(node: &Node, ctx: &mut LoadContext) -> Result<Mesh> {

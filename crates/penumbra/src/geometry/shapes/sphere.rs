@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Frame, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
-use crate::scene::{LoadContext, Node};
+use crate::scene::description::{LoadContext, Node};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::f32::consts::PI;
 

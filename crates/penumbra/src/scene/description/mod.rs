@@ -7,6 +7,7 @@
 //! their parameters from a [`Node`]; the assembly of a `Scene`
 //! (`scene/build.rs`), above the plugins, builds them from the tree.
 
+mod load_context;
 mod props;
 mod resolver;
 pub mod spectrum;
@@ -14,6 +15,7 @@ mod spectrum_plugin;
 mod upgrade;
 pub mod xml;
 
+pub use load_context::LoadContext;
 pub use props::{Class, Node, Prop, Value};
 pub use resolver::FileResolver;
 pub use xml::{child_key, parse_file, parse_str, SceneDescription};
