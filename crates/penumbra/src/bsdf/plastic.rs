@@ -82,12 +82,22 @@ pub(crate) fn sampling_weight(
 }
 
 /// The diffuse base of `plastic` and `roughplastic`:
-/// (`diffuse_reflectance` (RGB in [0, 1], default 0.5),
-/// `specular_reflectance` (optional factor), `nonlinear` (default false)).
+/// [`coating_reflectances`] and `nonlinear` (default false).
 pub(crate) fn coated_diffuse_props(
     node: &Node,
     ctx: &mut LoadContext,
 ) -> Result<(Texture, Option<Texture>, bool)> {
+    let (diffuse_reflectance, specular_reflectance) = coating_reflectances(node, ctx)?;
+    let nonlinear = node.bool("nonlinear", false)?;
+    Ok((diffuse_reflectance, specular_reflectance, nonlinear))
+}
+
+/// The reflectances of the plastics: `diffuse_reflectance` (RGB in
+/// [0, 1], default 0.5) and `specular_reflectance` (optional factor).
+pub(crate) fn coating_reflectances(
+    node: &Node,
+    ctx: &mut LoadContext,
+) -> Result<(Texture, Option<Texture>)> {
     let diffuse_reflectance = Texture::from_prop(
         node,
         "diffuse_reflectance",
@@ -97,8 +107,7 @@ pub(crate) fn coated_diffuse_props(
         ctx,
     )?;
     let specular_reflectance = specular_factor(node, "specular_reflectance", ctx)?;
-    let nonlinear = node.bool("nonlinear", false)?;
-    Ok((diffuse_reflectance, specular_reflectance, nonlinear))
+    Ok((diffuse_reflectance, specular_reflectance))
 }
 
 impl Plastic {

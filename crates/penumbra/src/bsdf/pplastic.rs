@@ -14,20 +14,21 @@
 //! probability s̄ / (ρ̄ + s̄) of the texture means, the diffuse lobe by
 //! cosine sampling, and weights by the mixture's pdf (as Mitsuba does).
 
-use super::fresnel::{fresnel_dielectric, reflect};
+use super::fresnel::fresnel_dielectric;
 use super::microfacet::{warn_if_smooth, MicrofacetDistribution, MicrofacetType};
-use super::plastic::sampling_weight;
+use super::plastic::{coating_reflectances, sampling_weight};
+use super::roughplastic::{coating_reflection, glossy_or_diffuse_pdf, sample_glossy_or_diffuse};
 use super::{
-    eta_props, eval_factor, modulate, scalar_param, smooth_sample, specular_factor, BsdfContextT,
-    BsdfFlags, BsdfSample, BsdfT, NodeContext,
+    eta_props, eval_factor, modulate, scalar_param, smooth_sample, BsdfContextT, BsdfFlags,
+    BsdfSample, BsdfT, NodeContext,
 };
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::{warp, Spectrum, V3};
+use crate::math::{Spectrum, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
-use crate::texture::{Channels, Texture, TextureT};
+use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// Polarised plastic, unpolarised. Parameters (Mitsuba 3):
@@ -97,15 +98,7 @@ impl PPlastic {
             Domain::Positive,
             ctx,
         )?;
-        let diffuse_reflectance = Texture::from_prop(
-            node,
-            "diffuse_reflectance",
-            Some(0.5),
-            Channels::Rgb,
-            Domain::UnitInterval,
-            ctx,
-        )?;
-        let specular_reflectance = specular_factor(node, "specular_reflectance", ctx)?;
+        let (diffuse_reflectance, specular_reflectance) = coating_reflectances(node, ctx)?;
         Ok(PPlastic {
             kind,
             alpha_u,
@@ -168,14 +161,7 @@ impl<R: Real> BsdfContextT<R> for PPlasticContext<R> {
             return V3::zero();
         }
         let eta = self.eta;
-        let m = (wi + wo).normalize();
-        let d = self.distr.eval(m);
-        let spec = if d.val() > 0.0 {
-            let f = fresnel_dielectric(wi.dot(m), eta).0;
-            V3::splat(f * d * self.distr.g(wi, wo, m) / (wi.z * 4.0))
-        } else {
-            V3::zero()
-        };
+        let spec = coating_reflection(&self.distr, wi, wo, eta);
         let t_i = -fresnel_dielectric(wi.z, eta).0 + 1.0;
         let t_o = -fresnel_dielectric(wo.z, eta).0 + 1.0;
         let diff = self.diffuse_reflectance * (t_i * t_o * wo.z * std::f32::consts::FRAC_1_PI);
@@ -187,14 +173,7 @@ impl<R: Real> BsdfContextT<R> for PPlasticContext<R> {
         if !(wi.z > 0.0 && wo.z > 0.0) {
             return 0.0;
         }
-        let ps = self.specular_probability;
-        let m = (wi + wo).normalize();
-        let p_spec = if wi.dot(m) > 0.0 && wo.dot(m) > 0.0 {
-            self.distr.detach().pdf(wi, m) / (4.0 * wo.dot(m))
-        } else {
-            0.0
-        };
-        ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo)
+        glossy_or_diffuse_pdf(&self.distr.detach(), wi, wo, self.specular_probability)
     }
 
     fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
@@ -202,21 +181,8 @@ impl<R: Real> BsdfContextT<R> for PPlasticContext<R> {
         if !(wi.z > 0.0) {
             return None;
         }
-        let (wo, lobe) = if u1 < self.specular_probability {
-            let (m, _) = self.distr.detach().sample(wi, u2);
-            (
-                reflect(V3::from(wi), V3::from(m)).val(),
-                BsdfFlags::GLOSSY_REFLECTION,
-            )
-        } else {
-            (
-                warp::square_to_cosine_hemisphere(u2),
-                BsdfFlags::DIFFUSE_REFLECTION,
-            )
-        };
-        if !(wo.z > 0.0) {
-            return None;
-        }
+        let (wo, lobe) =
+            sample_glossy_or_diffuse(&self.distr.detach(), wi, self.specular_probability, u1, u2)?;
         smooth_sample(self, wo, 1.0, lobe)
     }
 

@@ -253,6 +253,66 @@ fn rough_interface_tables(kind: MicrofacetType, alpha: f32, eta: f32) -> (Vec<f3
     (t, (2.0 * r_sum / TABLE_RES as f64) as f32)
 }
 
+/// `F D G / (4 cos θi)`: the rough dielectric reflection of a coating
+/// (times cos θo), shared by `roughplastic` and `pplastic`; zero where the
+/// half vector has no density.
+pub(crate) fn coating_reflection<R: Real>(
+    distr: &MicrofacetDistribution<R>,
+    wi: V3<R>,
+    wo: V3<R>,
+    eta: R,
+) -> Spectrum<R> {
+    let m = (wi + wo).normalize();
+    let d = distr.eval(m);
+    if !(d.val() > 0.0) {
+        return V3::zero();
+    }
+    let f = fresnel_dielectric(wi.dot(m), eta).0;
+    V3::splat(f * d * distr.g(wi, wo, m) / (wi.z * 4.0))
+}
+
+/// The density of a coating's two lobes at `wo` (both directions above
+/// the surface): the microfacet reflection chosen with probability `ps`,
+/// the cosine-weighted diffuse lobe otherwise.
+pub(crate) fn glossy_or_diffuse_pdf(
+    distr: &MicrofacetDistribution<f32>,
+    wi: Vec3,
+    wo: Vec3,
+    ps: f32,
+) -> f32 {
+    let m = (wi + wo).normalize();
+    let p_spec = if wi.dot(m) > 0.0 && wo.dot(m) > 0.0 {
+        distr.pdf(wi, m) / (4.0 * wo.dot(m))
+    } else {
+        0.0
+    };
+    ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo)
+}
+
+/// A direction from a coating's two lobes (see [`glossy_or_diffuse_pdf`])
+/// and the lobe it came from; `None` below the surface.
+pub(crate) fn sample_glossy_or_diffuse(
+    distr: &MicrofacetDistribution<f32>,
+    wi: Vec3,
+    ps: f32,
+    u1: f32,
+    u2: Vec2,
+) -> Option<(Vec3, BsdfFlags)> {
+    let (wo, lobe) = if u1 < ps {
+        let (m, _) = distr.sample(wi, u2);
+        (
+            reflect(V3::from(wi), V3::from(m)).val(),
+            BsdfFlags::GLOSSY_REFLECTION,
+        )
+    } else {
+        (
+            warp::square_to_cosine_hemisphere(u2),
+            BsdfFlags::DIFFUSE_REFLECTION,
+        )
+    };
+    (wo.z > 0.0).then_some((wo, lobe))
+}
+
 impl BsdfT for RoughPlastic {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::GLOSSY_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
@@ -295,17 +355,10 @@ impl<R: Real> BsdfContextT<R> for RoughPlasticContext<'_, R> {
             return V3::zero();
         }
         let eta = self.eta;
-        // specular: rough dielectric reflection
-        let distr = self.distr;
-        let m = (wi + wo).normalize();
-        let d = distr.eval(m);
-        let mut spec = if d.val() > 0.0 {
-            let f = fresnel_dielectric(wi.dot(m), eta).0;
-            V3::splat(f * d * distr.g(wi, wo, m) / (wi.z * 4.0))
-        } else {
-            V3::zero()
-        };
-        spec = modulate(spec, self.specular_reflectance);
+        let spec = modulate(
+            coating_reflection(&self.distr, wi, wo, eta),
+            self.specular_reflectance,
+        );
         let t_i = self.bsdf.transmittance(wi.z);
         let t_o = self.bsdf.transmittance(wo.z);
         let diff = coated_diffuse(
@@ -327,13 +380,7 @@ impl<R: Real> BsdfContextT<R> for RoughPlasticContext<'_, R> {
         }
         let t_i = self.bsdf.transmittance(wi.z);
         let ps = specular_probability(1.0 - t_i, self.bsdf.specular_sampling_weight);
-        let m = (wi + wo).normalize();
-        let p_spec = if wi.dot(m) > 0.0 && wo.dot(m) > 0.0 {
-            self.distr.detach().pdf(wi, m) / (4.0 * wo.dot(m))
-        } else {
-            0.0
-        };
-        ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo)
+        glossy_or_diffuse_pdf(&self.distr.detach(), wi, wo, ps)
     }
 
     fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
@@ -343,21 +390,7 @@ impl<R: Real> BsdfContextT<R> for RoughPlasticContext<'_, R> {
         }
         let t_i = self.bsdf.transmittance(wi.z);
         let ps = specular_probability(1.0 - t_i, self.bsdf.specular_sampling_weight);
-        let (wo, lobe) = if u1 < ps {
-            let (m, _) = self.distr.detach().sample(wi, u2);
-            (
-                reflect(V3::from(wi), V3::from(m)).val(),
-                BsdfFlags::GLOSSY_REFLECTION,
-            )
-        } else {
-            (
-                warp::square_to_cosine_hemisphere(u2),
-                BsdfFlags::DIFFUSE_REFLECTION,
-            )
-        };
-        if !(wo.z > 0.0) {
-            return None;
-        }
+        let (wo, lobe) = sample_glossy_or_diffuse(&self.distr.detach(), wi, ps, u1, u2)?;
         smooth_sample(self, wo, 1.0, lobe)
     }
 
