@@ -84,10 +84,12 @@ struct TileSums<'a> {
     pages: Vec<u32>,
     /// [`PAGE`] sums per slot; all zero between tiles.
     values: Vec<f64>,
-    /// Whether a value was touched in this tile: an explicit flag, since a
-    /// sum can return to zero.
-    touched_flag: Vec<bool>,
-    /// (parameter, element, index in `values`), in the order first touched.
+    /// (parameter, element, index in `values`) of each value that was zero
+    /// when added to, in that order: every element touched, some twice (a
+    /// sum that returned to zero), which [`TileSums::take`] hands over
+    /// once with its sum and then as 0. Testing the value costs nothing
+    /// (it is being read anyway), where a flag per element was a second
+    /// cache miss per addition.
     touched: Vec<(u32, u32, usize)>,
 }
 
@@ -99,7 +101,6 @@ impl<'a> TileSums<'a> {
             page_slot: vec![0; n.div_ceil(PAGE)],
             pages: Vec::new(),
             values: Vec::new(),
-            touched_flag: Vec::new(),
             touched: Vec::new(),
         }
     }
@@ -115,27 +116,24 @@ impl<'a> TileSums<'a> {
             self.page_slot[page] = slot as u32;
             if self.values.len() < slot * PAGE {
                 self.values.resize(slot * PAGE, 0.0);
-                self.touched_flag.resize(slot * PAGE, false);
             }
         }
         let k = (slot - 1) * PAGE + (flat & (PAGE - 1));
-        if !self.touched_flag[k] {
-            self.touched_flag[k] = true;
+        let v = &mut self.values[k];
+        if *v == 0.0 {
             self.touched.push((id.0, i as u32, k));
         }
-        self.values[k] += g;
+        *v += g;
     }
 
-    /// The tile's sums, (parameter, element, sum), one per element touched;
+    /// The tile's sums, (parameter, element, sum), per element touched
+    /// (the extra entries of an element are 0: adding them changes no sum);
     /// leaves the buffers zero for the next tile.
     fn take(&mut self) -> Vec<(u32, u32, f64)> {
         let out = self
             .touched
             .drain(..)
-            .map(|(id, i, k)| {
-                self.touched_flag[k] = false;
-                (id, i, std::mem::take(&mut self.values[k]))
-            })
+            .map(|(id, i, k)| (id, i, std::mem::take(&mut self.values[k])))
             .collect();
         for p in self.pages.drain(..) {
             self.page_slot[p as usize] = 0;
