@@ -185,6 +185,11 @@ impl Medium {
         let (Some(m), Some(grid)) = (&self.majorant_grid, self.sigma_t.grid()) else {
             return Walk::uniform(t0, t1, self.majorant);
         };
+        if let Some(single) = m.single() {
+            // at least the whole medium's bound, for the parts outside
+            // the cube (the floor is a tenth of it)
+            return Walk::uniform(t0, t1, single.max(self.majorant));
+        }
         let floor = if store.has_tangent(grid.data) || store.is_recorded(grid.data) {
             self.tracked_floor
         } else {
