@@ -399,7 +399,7 @@ impl BoundarySamples for Context<'_> {
             // aimed from the offset origin, so that the side is the one
             // meant whatever the offset (it is of the order of SIDE_ANGLE)
             let target = m + n * (sign * SIDE_ANGLE * r_m);
-            let o = si.offset_origin(target - x3);
+            let o = si.point().offset_origin(target - x3);
             let dir = (target - o).normalize();
             let ray = Ray::new(o, dir);
             let side_hit = scene.intersect(&ray);

@@ -166,12 +166,45 @@ impl<R: Real> SurfaceInteraction<R> {
         self.sh_frame.to_local(v)
     }
 
+    /// The point and geometric normal (primal), which rays leaving the
+    /// surface start from.
+    #[inline(always)]
+    pub fn point(&self) -> SurfacePoint {
+        SurfacePoint {
+            p: self.p.val(),
+            n: self.n.val(),
+        }
+    }
+
+    /// A ray leaving the surface in world direction `d`.
+    #[inline(always)]
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        self.point().spawn_ray(d)
+    }
+
+    /// A shadow ray from the surface to point `target` (stops just short).
+    #[inline(always)]
+    pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
+        self.point().spawn_ray_to(target)
+    }
+}
+
+/// A point on a surface with its geometric normal (oriented as the shape
+/// defines it), primal: all a ray passing through the surface needs (the
+/// side it leaves on, its offset origin), without the shading frame,
+/// texture coordinates and tangents of a [`SurfaceInteraction`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub p: Vec3,
+    pub n: Vec3,
+}
+
+impl SurfacePoint {
     /// Origin offset for rays leaving the surface towards `d` (side chosen
     /// by the geometric normal), scaled with the position's magnitude.
     #[inline(always)]
     pub fn offset_origin(&self, d: Vec3) -> Vec3 {
-        let p = self.p.val();
-        let n = self.n.val();
+        let (p, n) = (self.p, self.n);
         let mag = (1.0 + p.abs().max_element()) * RAY_EPSILON;
         if n.dot(d) >= 0.0 {
             p + n * mag
@@ -189,7 +222,7 @@ impl<R: Real> SurfaceInteraction<R> {
     /// A shadow ray from the surface to point `target` (stops just short).
     #[inline(always)]
     pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
-        let o = self.offset_origin(target - self.p.val());
+        let o = self.offset_origin(target - self.p);
         let d = target - o;
         let dist = d.length();
         Ray {

@@ -36,7 +36,7 @@
 use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::edges::EdgeTable;
-use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction, SurfacePoint};
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use glam::{Vec2, Vec3};
@@ -589,6 +589,19 @@ impl Mesh {
         let mut si = self.local_geometry(store, hit, idx, [p0, p1, p2], b1, b2, p, t);
         si.wi = si.to_local(-d);
         si
+    }
+
+    /// The point and geometric normal of the hit (primal), as
+    /// [`Mesh::triangle_interaction`] computes them in f32: the point
+    /// interpolated at the traversal's barycentrics, the face's normal.
+    pub fn triangle_point_primal(&self, store: &ParamView, hit: &Hit) -> SurfacePoint {
+        let (_, [p0, p1, p2]) = self.triangle_r::<f32>(store, hit.prim);
+        let (b1, b2) = (hit.uv.x, hit.uv.y);
+        let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+        SurfacePoint {
+            p: p.val(),
+            n: self.face_n[hit.prim as usize],
+        }
     }
 
     /// The vertex normal of vertex `v` recomputed from the positions in `R`

@@ -17,6 +17,6 @@ pub mod shapes;
 
 pub use accel::Accel;
 pub use instance::{Instance, ShapeGroup};
-pub use interaction::{DiffRay, Hit, PositionSample, Ray, SurfaceInteraction};
+pub use interaction::{DiffRay, Hit, PositionSample, Ray, SurfaceInteraction, SurfacePoint};
 pub use mesh::{Mesh, MeshData, MeshOptions, SkippedFaces};
 pub use shape::{Shape, ShapeT, SHAPE_PLUGINS};

@@ -32,7 +32,7 @@ use crate::ad::Real;
 use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::{DirectionSample, EmitterSample, EmitterT};
 use crate::error::Result;
-use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction};
+use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction, SurfacePoint};
 use crate::math::{Spectrum, V3};
 use crate::medium::FreeFlight;
 use crate::params::ParamView;
@@ -184,8 +184,18 @@ impl VolPathIntegrator {
                 }
                 return result;
             };
+            let bsdf = scene.shape_bsdf(h.shape);
+            let emitter = scene.shape_emitter(h.shape);
+            // an index-matched boundary: not a bounce
+            if matches!(bsdf, Bsdf::Null(_)) && emitter.is_none() {
+                let sp = scene.hit_point(store, &ray, &h);
+                medium = next_medium(scene, &h, sp.n, ray.d, medium);
+                ray = sp.spawn_ray(ray.d);
+                hit = scene.intersect(&ray);
+                continue;
+            }
             let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
-            if let Some(em) = scene.shape_emitter(h.shape) {
+            if let Some(em) = emitter {
                 if !(self.hide_emitters && depth == 0) {
                     let le = scene.emitters[em as usize].eval_surface(store, &si);
                     if !le.is_zero() {
@@ -205,8 +215,6 @@ impl VolPathIntegrator {
                     }
                 }
             }
-            let bsdf = scene.shape_bsdf(h.shape);
-            // an index-matched boundary: not a bounce
             if matches!(bsdf, Bsdf::Null(_)) {
                 medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
                 ray = si.spawn_ray(ray.d);
@@ -287,7 +295,7 @@ impl VolPathIntegrator {
         let (mut ray, mut medium, es) = match from {
             Vertex::Surface(h, si) => {
                 let es = scene.sample_emitter::<R>(store, si.p, u)?;
-                let ray = shadow_ray(si, &es.ds);
+                let ray = shadow_ray(&si.point(), &es.ds);
                 // leave the surface on the emitter's side, into the medium
                 // there
                 let medium = next_medium(scene, h, si.n.val(), ray.d, medium);
@@ -321,27 +329,34 @@ impl VolPathIntegrator {
             if !bsdf.flags().has(BsdfFlags::NULL) {
                 return None;
             }
-            let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
-            let mut ctx = BsdfContext::empty();
-            ctx.set(bsdf, store, &si);
-            tr = tr.mul_elem(ctx.null_transmission());
-            if !R::DIFFERENTIABLE && tr.is_zero() {
-                return None;
-            }
-            medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
-            ray = shadow_ray(&si, &es.ds);
+            let sp = if matches!(bsdf, Bsdf::Null(_)) {
+                // lets all light through, with no derivative: only the
+                // point is needed, not the local geometry
+                scene.hit_point(store, &ray, &h)
+            } else {
+                let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
+                let mut ctx = BsdfContext::empty();
+                ctx.set(bsdf, store, &si);
+                tr = tr.mul_elem(ctx.null_transmission());
+                if !R::DIFFERENTIABLE && tr.is_zero() {
+                    return None;
+                }
+                si.point()
+            };
+            medium = next_medium(scene, &h, sp.n, ray.d, medium);
+            ray = shadow_ray(&sp, &es.ds);
         }
     }
 }
 
-/// A shadow ray from the surface point `si` towards the emitter sample
+/// A shadow ray from the surface point `sp` towards the emitter sample
 /// `ds`: to its point, stopping just short, or along its direction for an
 /// emitter at infinity.
-fn shadow_ray<R: Real>(si: &SurfaceInteraction<R>, ds: &DirectionSample) -> Ray {
+fn shadow_ray(sp: &SurfacePoint, ds: &DirectionSample) -> Ray {
     if ds.dist.is_finite() {
-        si.spawn_ray_to(ds.p)
+        sp.spawn_ray_to(ds.p)
     } else {
-        si.spawn_ray(ds.d)
+        sp.spawn_ray(ds.d)
     }
 }
 

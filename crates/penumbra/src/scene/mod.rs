@@ -19,7 +19,9 @@ use crate::ad::Real;
 use crate::bsdf::Bsdf;
 use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
-use crate::geometry::{DiffRay, Hit, Instance, Ray, Shape, ShapeGroup, ShapeT, SurfaceInteraction};
+use crate::geometry::{
+    DiffRay, Hit, Instance, Ray, Shape, ShapeGroup, ShapeT, SurfaceInteraction, SurfacePoint,
+};
 use crate::integrator::Integrator;
 use crate::math::{DiscreteDistribution, V3};
 use crate::medium::Medium;
@@ -160,6 +162,19 @@ impl Scene {
             return SurfaceInteraction::cst(&self.hit_interaction(shape, store, &ray, hit));
         }
         self.hit_interaction(shape, store, ray, hit)
+    }
+
+    /// The point and geometric normal of `hit` (primal), equal to those of
+    /// [`Scene::surface_interaction`] for a surface that does not move:
+    /// what a ray passing through an index-matched boundary needs, at the
+    /// cost of an interpolation for a triangle.
+    pub fn hit_point(&self, store: &ParamView, ray: &Ray, hit: &Hit) -> SurfacePoint {
+        match (&self.shapes[hit.shape as usize], hit.instance) {
+            (Shape::Mesh(mesh), None) => mesh.triangle_point_primal(store, hit),
+            _ => self
+                .surface_interaction::<f32>(store, &DiffRay::cst(ray), hit)
+                .point(),
+        }
     }
 
     /// [`Scene::surface_interaction`] of a hit of `shape`, directly or
@@ -327,6 +342,55 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The point and normal a ray passing through a surface is given are
+    /// those of the full interaction, for meshes (flipped, rotated,
+    /// instanced) and analytic shapes.
+    #[test]
+    fn hit_points_are_those_of_the_surface_interaction() {
+        let scene = Scene::load_str(
+            r#"<scene version="3.0.0">
+                <sensor type="perspective"/>
+                <shape type="sphere"><point name="center" x="-2" y="0" z="0"/></shape>
+                <shape type="cube">
+                    <boolean name="flip_normals" value="true"/>
+                    <transform name="to_world">
+                        <scale x="0.7" y="1.2" z="0.5"/><rotate x="1" y="1" angle="30"/>
+                    </transform>
+                </shape>
+                <shape type="shapegroup" id="group">
+                    <shape type="rectangle"/>
+                </shape>
+                <shape type="instance">
+                    <ref id="group"/>
+                    <transform name="to_world"><translate x="2.5"/></transform>
+                </shape>
+            </scene>"#,
+            Path::new("t.xml"),
+            &[],
+        )
+        .unwrap();
+        let store = scene.params.primal();
+        let mut kinds = [0; 3];
+        for i in 0..400 {
+            let (x, y) = ((i % 20) as f32 / 4.0 - 2.6, (i / 20) as f32 / 8.0 - 1.2);
+            let ray = Ray::new(
+                Vec3::new(x, y, -5.0),
+                Vec3::new(0.02, 0.01, 1.0).normalize(),
+            );
+            let Some(hit) = scene.intersect(&ray) else {
+                continue;
+            };
+            let si = scene.surface_interaction::<f32>(&store, &DiffRay::cst(&ray), &hit);
+            assert_eq!(scene.hit_point(&store, &ray, &hit), si.point(), "{hit:?}");
+            kinds[if hit.instance.is_some() {
+                2
+            } else {
+                hit.shape.min(1) as usize
+            }] += 1;
+        }
+        assert!(kinds.iter().all(|&k| k > 10), "{kinds:?}");
+    }
 
     #[test]
     fn batch_queries_equal_one_ray_at_a_time() {
