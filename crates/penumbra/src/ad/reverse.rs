@@ -2,11 +2,13 @@
 //! "Radiative Backpropagation"; Vicini et al. 2021, "Path Replay
 //! Backpropagation").
 //!
-//! Operations on [`Var`] record onto a small thread-local tape. Path replay
-//! records only the terms of ONE path vertex (BSDF value, emitted radiance,
-//! texture lookups), propagates the adjoint radiance through them with
-//! [`backward`], scatters the result into parameter gradients, and clears
-//! the tape: memory stays independent of path length and sample count.
+//! Operations on [`Var`] record onto a small thread-local tape. Reverse
+//! mode (`diff/prb.rs`) records the computation of ONE path (the operations
+//! on values that depend on the differentiated parameters: BSDF values,
+//! emitted radiance, texture and volume lookups), propagates its adjoint
+//! radiance through them with [`backward`], scatters the result into
+//! parameter gradients, and clears the tape: memory stays independent of
+//! the sample count, and holds one path's dependent operations.
 
 use super::{weighted_sum, Real};
 use crate::params::{ParamId, ParamView};
@@ -15,6 +17,9 @@ use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssi
 
 /// Index of "no tape node": a constant.
 const CONST: u32 = u32::MAX;
+
+/// A key no pushed node has (two constant operands).
+const NO_KEY: u128 = u128::MAX;
 
 /// One recorded operation: up to two operands with their partial
 /// derivatives.
@@ -32,6 +37,9 @@ struct Tape {
     leaves: Vec<(ParamId, u32, u32, f32)>,
     /// Adjoint scratch space, reused between calls.
     adjoints: Vec<f32>,
+    /// The operands and partials of the last node, packed, if [`push`]
+    /// recorded it; [`NO_KEY`] after a leaf or a clear.
+    last_key: u128,
 }
 
 thread_local! {
@@ -41,6 +49,7 @@ thread_local! {
             nodes: Vec::new(),
             leaves: Vec::new(),
             adjoints: Vec::new(),
+            last_key: NO_KEY,
         })
     };
 }
@@ -63,9 +72,16 @@ impl Default for Var {
 /// arithmetic and a test.
 #[inline(never)]
 fn push(args: [u32; 2], partials: [f32; 2]) -> u32 {
-    TAPE.with(|t| {
-        let mut t = t.borrow_mut();
+    let key = (args[0] as u128)
+        | (args[1] as u128) << 32
+        | (partials[0].to_bits() as u128) << 64
+        | (partials[1].to_bits() as u128) << 96;
+    TAPE.with_borrow_mut(|t| {
         let i = t.nodes.len() as u32;
+        if t.last_key == key {
+            return i - 1;
+        }
+        t.last_key = key;
         t.nodes.push(TapeNode { args, partials });
         i
     })
@@ -73,21 +89,20 @@ fn push(args: [u32; 2], partials: [f32; 2]) -> u32 {
 
 impl Var {
     /// A tape node of value `v` whose leaves are the elements `terms`
-    /// (index, weight) of recorded parameter `id`; zero weights are left
-    /// out.
+    /// (index, weight) of recorded parameter `id`.
     fn param_leaf(v: f32, id: ParamId, terms: &[(usize, f32)]) -> Var {
         TAPE.with(|t| {
             let mut t = t.borrow_mut();
             let node = t.nodes.len() as u32;
+            t.last_key = NO_KEY;
             t.nodes.push(TapeNode {
                 args: [CONST, CONST],
                 partials: [0.0, 0.0],
             });
-            for &(i, w) in terms {
-                if w != 0.0 {
-                    t.leaves.push((id, i as u32, node, w));
-                }
-            }
+            // zero weights too (a slice's map extends in one step): their
+            // adjoints are zero, which `backward` does not hand over
+            t.leaves
+                .extend(terms.iter().map(|&(i, w)| (id, i as u32, node, w)));
             Var { v, node }
         })
     }
@@ -136,6 +151,7 @@ pub fn clear_tape() {
         let mut t = t.borrow_mut();
         t.nodes.clear();
         t.leaves.clear();
+        t.last_key = NO_KEY;
     });
 }
 
@@ -180,6 +196,7 @@ pub fn backward(outputs: &[(Var, f32)], mut scatter: impl FnMut(ParamId, usize, 
         }
         t.nodes.clear();
         t.leaves.clear();
+        t.last_key = NO_KEY;
     });
 }
 
@@ -425,6 +442,37 @@ mod tests {
             assert_eq!((Var::cst(a) / Var::cst(b)).val(), a / b);
             assert_eq!((Dual::cst(a) / Dual::cst(b)).val(), a / b);
         }
+    }
+
+    /// An operation repeated on the same operands with the same partials
+    /// (the channels of a grey spectrum) is recorded once, whatever the
+    /// values (`a + 1` and `a + 2` share a node), and the gradient is
+    /// unchanged.
+    #[test]
+    fn repeated_operations_are_recorded_once() {
+        let mut s = ParamStore::new();
+        let id = s
+            .add(
+                "x.value",
+                vec![0.5, 2.0],
+                vec![2],
+                ParamFlags::DIFFERENTIABLE,
+                Domain::Finite,
+            )
+            .unwrap();
+        let recorded = Seeds::recorded(&s, &[id]).unwrap();
+        let view = s.view(&recorded);
+        clear_tape();
+        let (a, b): (Var, Var) = (view.read(id, 0), view.read(id, 1));
+        let (p, q, r) = (a * b, a * b, a * b);
+        let (u, w) = (a + 1.0, a + 2.0);
+        TAPE.with(|t| assert_eq!(t.borrow().nodes.len(), 4));
+        assert_eq!((u.v, w.v), (1.5, 2.5));
+        let out = p + q * 2.0 + r * 3.0 + u * w;
+        let mut grad = [0.0f32; 2];
+        backward(&[(out, 1.0)], |_, i, g| grad[i] += g);
+        // d/da = 6b + (a + 2) + (a + 1), d/db = 6a
+        assert_eq!(grad, [6.0 * 2.0 + 2.5 + 1.5, 6.0 * 0.5]);
     }
 
     #[test]
