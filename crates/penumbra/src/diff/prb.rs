@@ -76,6 +76,11 @@ const PAGE: usize = 1 << PAGE_BITS;
 /// elements; a page gets its storage when the tile first touches it, so a
 /// worker holds the pages its tile reads (a density grid or a texture may
 /// have millions of elements, a tile's paths touch few of them).
+///
+/// An addition reads and writes its sum and nothing else depends on it:
+/// which elements were touched is found by scanning the touched pages at
+/// the end of the tile, not by testing each sum as it is added to (a
+/// branch on a value that is often a cache miss, which stalled the sweep).
 struct TileSums<'a> {
     offsets: &'a [usize],
     /// Per page: 1 + its slot in `values`; 0 if the tile has not touched it.
@@ -84,13 +89,6 @@ struct TileSums<'a> {
     pages: Vec<u32>,
     /// [`PAGE`] sums per slot; all zero between tiles.
     values: Vec<f64>,
-    /// (parameter, element, index in `values`) of each value that was zero
-    /// when added to, in that order: every element touched, some twice (a
-    /// sum that returned to zero), which [`TileSums::take`] hands over
-    /// once with its sum and then as 0. Testing the value costs nothing
-    /// (it is being read anyway), where a flag per element was a second
-    /// cache miss per addition.
-    touched: Vec<(u32, u32, usize)>,
 }
 
 impl<'a> TileSums<'a> {
@@ -101,7 +99,6 @@ impl<'a> TileSums<'a> {
             page_slot: vec![0; n.div_ceil(PAGE)],
             pages: Vec::new(),
             values: Vec::new(),
-            touched: Vec::new(),
         }
     }
 
@@ -118,26 +115,28 @@ impl<'a> TileSums<'a> {
                 self.values.resize(slot * PAGE, 0.0);
             }
         }
-        let k = (slot - 1) * PAGE + (flat & (PAGE - 1));
-        let v = &mut self.values[k];
-        if *v == 0.0 {
-            self.touched.push((id.0, i as u32, k));
-        }
-        *v += g;
+        self.values[(slot - 1) * PAGE + (flat & (PAGE - 1))] += g;
     }
 
-    /// The tile's sums, (parameter, element, sum), per element touched
-    /// (the extra entries of an element are 0: adding them changes no sum);
-    /// leaves the buffers zero for the next tile.
+    /// The tile's sums that are not zero, (parameter, element, sum) (a sum
+    /// that is zero would add nothing); leaves the buffers zero for the
+    /// next tile.
     fn take(&mut self) -> Vec<(u32, u32, f64)> {
-        let out = self
-            .touched
-            .drain(..)
-            .map(|(id, i, k)| (id, i, std::mem::take(&mut self.values[k])))
-            .collect();
-        for p in self.pages.drain(..) {
-            self.page_slot[p as usize] = 0;
+        let mut out = Vec::new();
+        for (page, values) in self.pages.iter().zip(self.values.chunks_exact_mut(PAGE)) {
+            let first = *page as usize * PAGE;
+            for (j, v) in values.iter_mut().enumerate() {
+                if *v != 0.0 {
+                    let flat = first + j;
+                    // the parameter whose range holds `flat`
+                    let id = self.offsets.partition_point(|&o| o <= flat) - 1;
+                    out.push((id as u32, (flat - self.offsets[id]) as u32, *v));
+                    *v = 0.0;
+                }
+            }
+            self.page_slot[*page as usize] = 0;
         }
+        self.pages.clear();
         out
     }
 }
