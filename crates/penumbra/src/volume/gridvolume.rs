@@ -29,7 +29,7 @@ enum Wrap {
 
 impl Wrap {
     /// Voxel index `i` of a `n`-voxel axis mapped into `0..n`.
-    #[inline]
+    #[inline(always)]
     fn index(self, i: i64, n: usize) -> usize {
         let n = n as i64;
         (match self {
@@ -215,17 +215,16 @@ impl GridVolume {
             }
             Filter::Trilinear => {
                 // per axis: the two voxels around x (wrapped) and their
-                // weights
-                let axis = |a: usize| {
-                    let i = floor(x[a]);
-                    let f = x[a] - i as f32;
-                    let n = self.res[a];
-                    (
-                        [self.wrap.index(i, n), self.wrap.index(i + 1, n)],
-                        [1.0 - f, f],
-                    )
+                // weights, the three axes at once
+                let lo = [floor(x.x), floor(x.y), floor(x.z)];
+                let f = x - Vec3::new(lo[0] as f32, lo[1] as f32, lo[2] as f32);
+                let g = Vec3::ONE - f;
+                let pair = |a: usize| {
+                    let (i, n) = (lo[a], self.res[a]);
+                    [self.wrap.index(i, n), self.wrap.index(i + 1, n)]
                 };
-                let ((ix, wx), (iy, wy), (iz, wz)) = (axis(0), axis(1), axis(2));
+                let (ix, iy, iz) = (pair(0), pair(1), pair(2));
+                let (wx, wy, wz) = ([g.x, f.x], [g.y, f.y], [g.z, f.z]);
                 let [nx, ny, _] = self.res;
                 let mut terms = [(0usize, 0.0f32); 8];
                 for (corner, term) in terms.iter_mut().enumerate() {
