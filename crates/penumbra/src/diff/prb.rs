@@ -68,23 +68,22 @@ impl Gradients {
 const PAGE_BITS: u32 = 9;
 const PAGE: usize = 1 << PAGE_BITS;
 
-/// One worker's gradient sums over the tile it traces, one f32 per
+/// One worker's gradient sums over the tile it traces, one per
 /// (parameter, element), added in the order the samples scatter them: the
 /// same sums a map keyed by element would hold, at the cost of an array
-/// access. The tiles' sums are added in f64. f32 (as Mitsuba's gradient
-/// buffers): a 64³ grid's sums fit in half the cache of f64 ones, where
-/// the additions wait on memory (5 % of the density gradient's time);
-/// a tile's sums differ from f64 ones by about 1e-6 relative, far below
-/// the estimate's noise. The recorded elements are numbered in one flat index space
+/// access. The recorded elements are numbered in one flat index space
 /// (`offsets`: where each parameter starts) cut into pages of [`PAGE`]
 /// elements; a page gets its storage when the tile first touches it, so a
 /// worker holds the pages its tile reads (a density grid or a texture may
 /// have millions of elements, a tile's paths touch few of them).
 ///
-/// An addition reads and writes its sum and nothing else depends on it:
-/// which elements were touched is found by scanning the touched pages at
-/// the end of the tile, not by testing each sum as it is added to (a
-/// branch on a value that is often a cache miss, which stalled the sweep).
+/// The additions wait on memory (a 64³ density grid's sums are larger
+/// than a core's L2 cache), so they are kept lean: in f32, as Mitsuba's
+/// gradient buffers (half the footprint of f64; a tile's sums differ from
+/// f64 ones by about 1e-6 relative, far below the estimate's noise; the
+/// tiles are added in f64), and with no test on the value added to (which
+/// elements were touched is found by scanning the touched pages at the
+/// end of the tile).
 struct TileSums<'a> {
     offsets: &'a [usize],
     /// Per page: 1 + its slot in `values`; 0 if the tile has not touched it.

@@ -29,7 +29,9 @@
 //! Both trackers walk the cells along the ray (regular tracking: an
 //! exponential optical depth is drawn once per tentative collision and
 //! spent across cells, m × length per cell), and cells of majorant 0 are
-//! skipped: empty space costs no lookups.
+//! skipped: empty space costs no lookups. A grid whose cells differ too
+//! little for the walk to pay is tracked in one segment against its
+//! largest majorant (`MajorantGrid::single`).
 //!
 //! Empty cells and derivatives: the derivative of the transmittance
 //! through a cell is carried by its null collisions, one −1/m per
