@@ -186,18 +186,14 @@ impl VolPathIntegrator {
             };
             let bsdf = scene.shape_bsdf(h.shape);
             let emitter = scene.shape_emitter(h.shape);
-            // an index-matched boundary: not a bounce
-            if matches!(bsdf, Bsdf::Null(_)) && emitter.is_none() {
-                let sp = scene.hit_point(store, &ray, &h);
-                medium = next_medium(scene, &h, sp.n, ray.d, medium);
-                ray = sp.spawn_ray(ray.d);
-                hit = scene.intersect(&ray);
-                continue;
-            }
-            let si = scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h);
-            if let Some(em) = emitter {
+            // an index-matched boundary is no bounce; one that emits
+            // nothing needs only its point, not its local geometry
+            let crossing = matches!(bsdf, Bsdf::Null(_));
+            let si = (emitter.is_some() || !crossing)
+                .then(|| scene.surface_interaction::<R>(store, &DiffRay::cst(&ray), &h));
+            if let (Some(em), Some(si)) = (emitter, &si) {
                 if !(self.hide_emitters && depth == 0) {
-                    let le = scene.emitters[em as usize].eval_surface(store, &si);
+                    let le = scene.emitters[em as usize].eval_surface(store, si);
                     if !le.is_zero() {
                         let w = if last.delta {
                             1.0
@@ -215,12 +211,16 @@ impl VolPathIntegrator {
                     }
                 }
             }
-            if matches!(bsdf, Bsdf::Null(_)) {
-                medium = next_medium(scene, &h, si.n.val(), ray.d, medium);
-                ray = si.spawn_ray(ray.d);
+            if crossing {
+                let sp = si
+                    .as_ref()
+                    .map_or_else(|| scene.hit_point(store, &ray, &h), |si| si.point());
+                medium = next_medium(scene, &h, sp.n, ray.d, medium);
+                ray = sp.spawn_ray(ray.d);
                 hit = scene.intersect(&ray);
                 continue;
             }
+            let si = si.expect("every surface that is not crossed has its interaction");
             // At the last bounce only a pass-through (`NULL` lobe, which is
             // no bounce) can go on, as in Mitsuba: a path leaving a medium
             // through a thin dielectric or a mask still reaches what lies

@@ -59,9 +59,6 @@ pub(super) struct MajorantGrid {
     voxels: [usize; 3],
     /// Per cell, x fastest: the majorant (primal, with `scale`).
     majorants: Vec<f32>,
-    /// The cube root of a cell's volume in world units: the length of a
-    /// typical crossing.
-    cell_length: f32,
     /// The largest majorant, if the cells differ so little that tracking
     /// against it everywhere is cheaper than walking them (see
     /// [`SAVING_PER_CELL`]): a uniform grid, the usual first guess of a
@@ -89,16 +86,12 @@ impl MajorantGrid {
         let voxels = grid.res.map(|n| n.div_ceil(CELLS));
         let res = [0, 1, 2].map(|a| grid.res[a].div_ceil(voxels[a]));
         let extent = Vec3::from_array([0, 1, 2].map(|a| grid.res[a] as f32 / voxels[a] as f32));
-        let to_lattice = Transform::scale(extent).after(to_local);
-        // the lattice's cells have unit volume
-        let cell_length = to_lattice.inv.determinant().abs().cbrt();
         Some(MajorantGrid {
-            to_lattice,
+            to_lattice: Transform::scale(extent).after(to_local),
             extent,
             res,
             voxels,
             majorants: vec![0.0; res.iter().product()],
-            cell_length,
             single: None,
         })
     }
@@ -113,7 +106,10 @@ impl MajorantGrid {
         let max = self.majorants.iter().copied().fold(0.0, f32::max);
         let mean =
             self.majorants.iter().map(|&m| m as f64).sum::<f64>() / self.majorants.len() as f64;
-        let saving = (max as f64 - mean) * self.cell_length as f64;
+        // a typical crossing: the cube root of a cell's world volume (the
+        // lattice's cells have unit volume)
+        let cell_length = self.to_lattice.inv.determinant().abs().cbrt();
+        let saving = (max as f64 - mean) * cell_length as f64;
         self.single = (saving < SAVING_PER_CELL as f64).then_some(max);
     }
 
