@@ -20,7 +20,8 @@
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
 //! `f32` t, `inf` on a miss, `i32` shape, `i32` triangle, −1 on a miss;
-//! occluded: one byte per ray) and prints `RESULT {json}`.
+//! occluded: one byte per ray) and prints `RESULT {json}` (with the
+//! tree's size and fill, [`Accel::stats`]).
 
 use glam::Vec3;
 use penumbra::geometry::{Accel, Mesh, MeshData, MeshOptions, Ray, Shape};
@@ -182,11 +183,22 @@ fn main() {
     let out = dir.join(format!("penumbra_{kind}_t{threads}.bin"));
     std::fs::write(&out, bytes).unwrap_or_else(|e| fail(&format!("{}: {e}", out.display())));
     let times: Vec<String> = times.iter().map(|t| format!("{t:.6}")).collect();
+    let st = accel.stats();
     println!(
         "RESULT {{\"side\": \"penumbra\", \"kind\": \"{kind}\", \"threads\": {threads}, \"rays\": {}, \
-         \"triangles\": {}, \"build_s\": {build:.6}, \"times\": [{}]}}",
+         \"triangles\": {}, \"build_s\": {build:.6}, \"times\": [{}], \"tree\": {{\"width\": {}, \
+         \"nodes\": {}, \"children\": {}, \"leaves\": {}, \"packets\": {}, \"lanes\": {}, \
+         \"sah_nodes\": {:.4}, \"sah_packets\": {:.4}}}}}",
         rays.len(),
         accel.prim_count(),
-        times.join(", ")
+        times.join(", "),
+        st.width,
+        st.nodes,
+        st.children,
+        st.leaves,
+        st.packets,
+        st.lanes,
+        st.sah_nodes,
+        st.sah_packets,
     );
 }

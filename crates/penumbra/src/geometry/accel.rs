@@ -15,10 +15,11 @@
 //! Embree's BVH8).
 //!
 //! The tree is built as a binary BVH by PLOC with reinsertion (the `obvhs`
-//! crate), then collapsed to wide nodes (opening the child of largest
-//! surface area until the node is full; subtrees of at most four
-//! primitives become leaves). Triangles are two-sided (no backface
-//! culling). Analytic primitives sit in the packets as lanes flagged in a
+//! crate), then collapsed to wide nodes and leaves of at most two packets
+//! by the surface-area-optimal collapse of Ylitie et al. 2017 (a dynamic
+//! program over the binary tree, [`Collapse`]), and laid out so that a
+//! node's child nodes sit side by side. Triangles are two-sided (no
+//! backface culling). Analytic primitives sit in the packets as lanes flagged in a
 //! mask (zero edges), handled off the hot path.
 //!
 //! After vertex positions (or sphere/disk parameters) change, [`Accel::update`]
@@ -97,8 +98,9 @@ impl Analytic {
 const LEAF: u32 = 0x8000_0000;
 /// Child slot marker: no child (its box is empty and never hit).
 const EMPTY: u32 = u32::MAX;
-/// Subtrees with at most this many primitives become one leaf.
-const LEAF_SIZE: u32 = 4;
+/// The most primitives of a leaf (two packets; the collapse decides
+/// which subtrees become leaves).
+const MAX_LEAF: u32 = 8;
 /// Traversal stack entries kept on the machine stack; a tree that needs
 /// more (see [`Accel::stack_size`]) gets a heap stack of its exact size,
 /// chosen once per ray.
@@ -415,7 +417,7 @@ fn with_stack<T>(size: usize, f: impl FnOnce(Stack) -> T) -> T {
 fn node<const W: usize>(nodes: &[Node<W>], i: u32) -> &Node<W> {
     debug_assert!((i as usize) < nodes.len());
     // SAFETY: `i` is node 0 (traversal starts only on a non-empty tree) or
-    // a non-leaf, non-empty child slot, which `Collapse::node` set to the
+    // a non-leaf, non-empty child slot, which `Collapse::fill` set to the
     // index of a node it pushed.
     unsafe { nodes.get_unchecked(i as usize) }
 }
@@ -438,9 +440,15 @@ impl Closest {
         }
     }
     /// Keeps the hit at `t` of lane `j` of `p` if it is the closest yet.
+    /// Of hits at the same distance (coplanar faces: a medium's boundary
+    /// on the ground), the lowest (shape, primitive) wins, whatever order
+    /// the tree visits them in: results do not depend on how the tree was
+    /// built (a rebuild, a refit, 4- or 8-wide nodes), as the brute-force
+    /// reference of the tests.
     #[inline(always)]
     fn offer(&mut self, t: f32, p: &Tri4, j: usize, uv: Vec2) {
-        if t < self.tmax {
+        let first = |b: &Hit| t == b.t && (p.shape[j], p.prim[j]) < (b.shape, b.prim);
+        if t < self.tmax || self.best.as_ref().is_some_and(first) {
             self.tmax = t;
             self.tmax_far = t * FAR_ROUND_UP;
             self.best = Some(Hit {
@@ -464,42 +472,84 @@ impl Closest {
     }
 }
 
-/// Collapses the binary BVH `bvh2` into `W`-wide nodes and leaf packets.
+/// How [`Collapse`] represents a binary subtree in at most `i` slots of a
+/// wide node.
+#[derive(Clone, Copy, Debug)]
+enum Form {
+    /// One leaf holding all its primitives.
+    Leaf,
+    /// One wide node over the roots of its two binary children.
+    Node,
+    /// The roots of its left child in at most `.0` slots and of its right
+    /// child in at most `.1`.
+    Split(u8, u8),
+}
+
+/// Collapses the binary BVH `bvh2` into `W`-wide nodes and leaf packets,
+/// choosing the wide tree of least SAH cost among all that the binary tree
+/// contains (Ylitie, Karras, Laine 2017, "Efficient Incoherent Ray
+/// Traversal on GPUs Through Compressed Wide BVHs", section 4.1): a
+/// dynamic program over the binary nodes that, for each and for each
+/// number of slots `i` in `1..=W`, finds the cheapest way to represent its
+/// subtree as at most `i` roots (leaves or wide nodes), so that nodes are
+/// filled and leaves packed where the surface areas allow it.
 struct Collapse<'a, const W: usize> {
     bvh2: &'a Bvh2,
     /// Primitives below each binary node.
     count: Vec<u32>,
+    /// Per binary node, for `i` slots (index `i - 1`): the least cost of
+    /// its subtree in at most `i` roots, and its form.
+    cost: Vec<[f32; W]>,
+    form: Vec<[Form; W]>,
+    /// Per binary node: how a wide node made of it splits its `W` slots
+    /// between its children's roots (slots of the left child).
+    node_split: Vec<u8>,
     nodes: Vec<Node<W>>,
     leaves: Vec<[u32; 4]>,
     leaf_more: Vec<bool>,
     depth: usize,
 }
 
+/// SAH cost, per unit of surface area, of visiting a wide node (its box
+/// test, ordering the hit children, the stack) and of testing one leaf
+/// packet. Measured on the 327k-triangle reference mesh against Embree's
+/// rays (`scripts/bench_rays.py`, docs/perf/traversal.md): a packet at 0.5
+/// of a node gives fuller nodes (13.8k nodes instead of 18.9k at 1.0) and
+/// the fastest traversal of 0.2–1.0; a packet costing as much as a node
+/// makes the collapse split leaves into more slots.
+const NODE_COST: f32 = 1.0;
+const PACKET_COST: f32 = 0.5;
+
 impl<const W: usize> Collapse<'_, W> {
     fn new(bvh2: &Bvh2) -> Collapse<'_, W> {
-        let mut count = vec![0u32; bvh2.nodes.len()];
-        Self::count(bvh2, 0, &mut count);
-        Collapse {
+        let n = bvh2.nodes.len();
+        let mut c = Collapse {
             bvh2,
-            count,
+            count: vec![0; n],
+            cost: vec![[0.0; W]; n],
+            form: vec![[Form::Leaf; W]; n],
+            node_split: vec![0; n],
             nodes: Vec::new(),
             leaves: Vec::new(),
             leaf_more: Vec::new(),
             depth: 0,
-        }
+        };
+        c.plan(0);
+        c
     }
 
     /// Collapses the whole tree: the root is node 0.
     fn run(mut self) -> Self {
-        if self.bvh2.nodes[0].is_leaf() || self.count[0] <= LEAF_SIZE {
+        if self.bvh2.nodes[0].is_leaf() || matches!(self.form[0][0], Form::Leaf) {
             // a root leaf: one node with one child
-            let leaf = self.child(0, 1);
+            let leaf = self.leaf(0);
             let mut n = Node::EMPTY;
             n.set(0, leaf, self.bvh2.nodes[0].aabb());
             self.nodes.push(n);
             self.depth = 1;
         } else {
-            self.node(0, 0);
+            self.nodes.push(Node::EMPTY);
+            self.fill(0, 0, 0);
         }
         self
     }
@@ -510,16 +560,70 @@ impl<const W: usize> Collapse<'_, W> {
         (W - 1) * self.depth + 2
     }
 
-    fn count(bvh2: &Bvh2, i: usize, out: &mut [u32]) -> u32 {
-        let n = &bvh2.nodes[i];
-        let c = if n.is_leaf() {
-            n.prim_count
+    /// Fills `count`, `cost`, `form` and `node_split` for the subtree of
+    /// binary node `i` (children first).
+    fn plan(&mut self, i: usize) {
+        let n = &self.bvh2.nodes[i];
+        let area = n.aabb().half_area();
+        if n.is_leaf() {
+            let count = n.prim_count;
+            self.count[i] = count;
+            self.cost[i] = [area * PACKET_COST * count.div_ceil(4) as f32; W];
+            self.form[i] = [Form::Leaf; W];
+            return;
+        }
+        let (l, r) = (n.first_index as usize, n.first_index as usize + 1);
+        self.plan(l);
+        self.plan(r);
+        let count = self.count[l] + self.count[r];
+        self.count[i] = count;
+        // best[j]: the cheapest split of j + 1 slots between the children,
+        // and how many of them go to the left one (k; j + 1 - k right)
+        let mut best = [(f32::INFINITY, 0u8); W];
+        for (j, b) in best.iter_mut().enumerate().skip(1) {
+            for k in 1..=j {
+                let c = self.cost[l][k - 1] + self.cost[r][j - k];
+                if c < b.0 {
+                    *b = (c, k as u8);
+                }
+            }
+        }
+        let leaf = if count <= MAX_LEAF {
+            area * PACKET_COST * count.div_ceil(4) as f32
         } else {
-            let f = n.first_index as usize;
-            Self::count(bvh2, f, out) + Self::count(bvh2, f + 1, out)
+            f32::INFINITY
         };
-        out[i] = c;
-        c
+        let node = area * NODE_COST + best[W - 1].0;
+        self.node_split[i] = best[W - 1].1;
+        let (mut cost, mut form) = if leaf <= node {
+            (leaf, Form::Leaf)
+        } else {
+            (node, Form::Node)
+        };
+        self.cost[i][0] = cost;
+        self.form[i][0] = form;
+        for (j, &(c, k)) in best.iter().enumerate().skip(1) {
+            if c < cost {
+                cost = c;
+                form = Form::Split(k, (j + 1) as u8 - k);
+            }
+            self.cost[i][j] = cost;
+            self.form[i][j] = form;
+        }
+    }
+
+    /// The roots representing binary node `i` in at most `slots` slots:
+    /// `(binary node, is a leaf)`.
+    fn roots(&self, i: usize, slots: usize, out: &mut Vec<(usize, bool)>) {
+        match self.form[i][slots - 1] {
+            Form::Leaf => out.push((i, true)),
+            Form::Node => out.push((i, false)),
+            Form::Split(k, m) => {
+                let l = self.bvh2.nodes[i].first_index as usize;
+                self.roots(l, k as usize, out);
+                self.roots(l + 1, m as usize, out);
+            }
+        }
     }
 
     /// Build-order primitive indices below binary node `i`.
@@ -534,59 +638,69 @@ impl<const W: usize> Collapse<'_, W> {
         }
     }
 
-    /// The child slot for binary node `i`: a leaf of packets, or a new
-    /// wide node.
-    fn child(&mut self, i: usize, depth: usize) -> u32 {
-        if self.count[i] <= LEAF_SIZE || self.bvh2.nodes[i].is_leaf() {
-            let mut ids = Vec::new();
-            self.gather(i, &mut ids);
-            let first = self.leaves.len() as u32;
-            for (k, chunk) in ids.chunks(4).enumerate() {
-                let mut lanes = [u32::MAX; 4];
-                lanes[..chunk.len()].copy_from_slice(chunk);
-                if k > 0 {
-                    *self.leaf_more.last_mut().expect("a packet precedes") = true;
-                }
-                self.leaves.push(lanes);
-                self.leaf_more.push(false);
+    /// A leaf of the primitives below binary node `i`, in packets of four:
+    /// its child slot.
+    fn leaf(&mut self, i: usize) -> u32 {
+        let mut ids = Vec::new();
+        self.gather(i, &mut ids);
+        let first = self.leaves.len() as u32;
+        for (k, chunk) in ids.chunks(4).enumerate() {
+            let mut lanes = [u32::MAX; 4];
+            lanes[..chunk.len()].copy_from_slice(chunk);
+            if k > 0 {
+                *self.leaf_more.last_mut().expect("a packet precedes") = true;
             }
-            return LEAF | first;
+            self.leaves.push(lanes);
+            self.leaf_more.push(false);
         }
-        self.node(i, depth)
+        LEAF | first
     }
 
-    /// A wide node for the interior binary node `i`: opens the child of
-    /// largest surface area until `W` children are gathered.
-    fn node(&mut self, i: usize, depth: usize) -> u32 {
+    /// The wide node `idx` (already pushed) for the interior binary node
+    /// `i`, over the roots of its children as planned. Its leaves' packets
+    /// are laid out together, then its child nodes side by side, then
+    /// their subtrees: what one visit of the node may touch next is close
+    /// together in memory.
+    fn fill(&mut self, idx: usize, i: usize, depth: usize) {
         self.depth = self.depth.max(depth + 1);
-        let n = &self.bvh2.nodes[i];
-        let f = n.first_index as usize;
-        let mut kids = vec![f, f + 1];
-        while kids.len() < W {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, &k)| self.count[k] > LEAF_SIZE && !self.bvh2.nodes[k].is_leaf())
-                .max_by(|a, b| {
-                    let sa = self.bvh2.nodes[*a.1].aabb().half_area();
-                    let sb = self.bvh2.nodes[*b.1].aabb().half_area();
-                    sa.total_cmp(&sb)
-                })
-                .map(|(j, _)| j);
-            let Some(j) = open else { break };
-            let k = kids.swap_remove(j);
-            let fk = self.bvh2.nodes[k].first_index as usize;
-            kids.push(fk);
-            kids.push(fk + 1);
+        let l = self.bvh2.nodes[i].first_index as usize;
+        let k = self.node_split[i] as usize;
+        let mut kids = Vec::with_capacity(W);
+        self.roots(l, k, &mut kids);
+        self.roots(l + 1, W - k, &mut kids);
+        let mut inner = Vec::with_capacity(W);
+        for (slot, &(b, is_leaf)) in kids.iter().enumerate() {
+            let c = if is_leaf {
+                self.leaf(b)
+            } else {
+                self.nodes.push(Node::EMPTY);
+                inner.push((self.nodes.len() - 1, b));
+                (self.nodes.len() - 1) as u32
+            };
+            self.nodes[idx].set(slot, c, self.bvh2.nodes[b].aabb());
         }
-        let idx = self.nodes.len();
-        self.nodes.push(Node::EMPTY);
-        for (slot, &k) in kids.iter().enumerate() {
-            let c = self.child(k, depth + 1);
-            self.nodes[idx].set(slot, c, self.bvh2.nodes[k].aabb());
+        for (n, b) in inner {
+            self.fill(n, b, depth + 1);
         }
-        idx as u32
     }
+}
+
+/// Size and fill of an [`Accel`]'s wide tree.
+#[derive(Clone, Debug, Default)]
+pub struct TreeStats {
+    pub width: usize,
+    pub nodes: usize,
+    /// Non-empty child slots of all nodes.
+    pub children: usize,
+    pub leaves: usize,
+    /// Leaf packets and the lanes of them that hold a primitive.
+    pub packets: usize,
+    pub lanes: usize,
+    /// Sum over node children of their surface area relative to the
+    /// root's: the expected node visits (interior children) and leaf
+    /// visits of a ray crossing the root box (the surface-area heuristic).
+    pub sah_nodes: f32,
+    pub sah_packets: f32,
 }
 
 /// Closest-hit and any-hit ray queries over all shapes of a scene.
@@ -911,6 +1025,55 @@ impl Accel {
             .collect();
     }
 
+    /// Size and fill of the wide tree (for benchmarks beside other
+    /// libraries' statistics).
+    pub fn stats(&self) -> TreeStats {
+        fn walk<const W: usize>(nodes: &[Node<W>], st: &mut TreeStats) {
+            let root = nodes.first().map_or(0.0, |n| {
+                let (lo, hi) = (0..W).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), k| {
+                    let b = |s: usize| Vec3::new(n.b[s][0][k], n.b[s][1][k], n.b[s][2][k]);
+                    (lo.min(b(0)), hi.max(b(1)))
+                });
+                half_area(lo, hi)
+            });
+            st.nodes = nodes.len();
+            st.width = W;
+            for n in nodes {
+                for k in 0..W {
+                    if n.child[k] == EMPTY {
+                        continue;
+                    }
+                    st.children += 1;
+                    let b = |s: usize| Vec3::new(n.b[s][0][k], n.b[s][1][k], n.b[s][2][k]);
+                    let a = half_area(b(0), b(1)) / root;
+                    if n.child[k] & LEAF == 0 {
+                        st.sah_nodes += a;
+                    } else {
+                        st.leaves += 1;
+                        st.sah_packets += a;
+                    }
+                }
+            }
+        }
+        fn half_area(lo: Vec3, hi: Vec3) -> f32 {
+            let e = (hi - lo).max(Vec3::ZERO);
+            e.x * e.y + e.y * e.z + e.z * e.x
+        }
+        let mut st = TreeStats::default();
+        match &self.nodes {
+            Nodes::Four(n) => walk(n, &mut st),
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(n) => walk(n, &mut st),
+        }
+        st.packets = self.tris.len();
+        st.lanes = self
+            .tris
+            .iter()
+            .map(|p| p.shape.iter().filter(|&&s| s != u32::MAX).count())
+            .sum();
+        st
+    }
+
     /// Number of primitives (triangles, analytic shapes and instances) of
     /// the top level.
     pub fn prim_count(&self) -> usize {
@@ -1070,7 +1233,9 @@ impl Accel {
             let mut pi = (cur & !LEAF) as usize;
             loop {
                 let p = self.packet(pi);
-                let (mask, t, u, v) = tr.hit_tris(p, tmin, c.tmax);
+                // up to `tmax_far`: a hit at `tmax` itself (a tie, see
+                // `Closest::offer`) is not lost to the test's rounding
+                let (mask, t, u, v) = tr.hit_tris(p, tmin, c.tmax_far);
                 if mask != 0 {
                     let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
                     let mut m = mask;
@@ -1363,6 +1528,32 @@ mod tests {
         }
     }
 
+    /// Two copies of a mesh in the same place (coplanar faces, as a
+    /// medium's boundary on the ground): every ray reports the copy that
+    /// comes first in scene order, at both widths.
+    #[test]
+    fn ties_go_to_the_first_shape() {
+        let mut store = ParamStore::new();
+        let shapes = vec![
+            grid(16, "a", 0.0, &mut store),
+            grid(16, "b", 0.0, &mut store),
+        ];
+        let mut rng = Rng(11);
+        for w in widths() {
+            let accel = Accel::build_with_width(&shapes, &store, w);
+            let mut hits = 0;
+            for _ in 0..2000 {
+                let o = Vec3::new(2.0 * rng.f() - 1.0, 2.0 * rng.f() - 1.0, 2.0);
+                let ray = Ray::new(o, rng.dir() * 0.5 - Vec3::Z);
+                if let Some(h) = accel.intersect(&ray) {
+                    assert_eq!(h.shape, 0, "{ray:?} ({w:?})");
+                    hits += 1;
+                }
+            }
+            assert!(hits > 500, "{hits} hits");
+        }
+    }
+
     #[test]
     fn closest_hit_equals_brute_force_on_a_mixed_scene() {
         let mut store = ParamStore::new();
@@ -1388,6 +1579,83 @@ mod tests {
             let accel = Accel::build_with_width(&shapes, &store, w);
             check_against_brute(&shapes, &store, &accel, 11, 3000);
         }
+    }
+
+    /// The SAH cost of the wide tree `Collapse` built: interior nodes
+    /// (the root included) at `NODE_COST`, leaves at `PACKET_COST` per
+    /// packet, each weighted by its box's half area.
+    fn built_cost<const W: usize>(c: &Collapse<W>) -> f32 {
+        let half_area = |n: &Node<W>, k: usize| {
+            let e = Vec3::new(
+                n.b[1][0][k] - n.b[0][0][k],
+                n.b[1][1][k] - n.b[0][1][k],
+                n.b[1][2][k] - n.b[0][2][k],
+            );
+            e.x * e.y + e.y * e.z + e.z * e.x
+        };
+        let mut cost = c.bvh2.nodes[0].aabb().half_area() * NODE_COST;
+        for n in &c.nodes {
+            for k in 0..W {
+                match n.child[k] {
+                    EMPTY => {}
+                    ch if ch & LEAF == 0 => cost += half_area(n, k) * NODE_COST,
+                    ch => {
+                        let mut packets = 1;
+                        let mut i = (ch & !LEAF) as usize;
+                        while c.leaf_more[i] {
+                            (packets, i) = (packets + 1, i + 1);
+                        }
+                        cost += half_area(n, k) * PACKET_COST * packets as f32;
+                    }
+                }
+            }
+        }
+        cost
+    }
+
+    /// The collapse builds the wide tree its dynamic program planned (same
+    /// SAH cost), with every primitive in exactly one lane and no leaf
+    /// above `MAX_LEAF`, at both widths.
+    #[test]
+    fn collapse_builds_the_planned_tree() {
+        fn check<const W: usize>(bvh2: &Bvh2, prims: usize) {
+            let c = Collapse::<W>::new(bvh2).run();
+            assert!(matches!(c.form[0][0], Form::Node));
+            let (planned, built) = (c.cost[0][0], built_cost(&c));
+            assert!(
+                (planned - built).abs() <= 1e-4 * planned,
+                "W = {W}: planned {planned}, built {built}"
+            );
+            let mut seen = vec![0u32; prims];
+            for id in c.leaves.iter().flatten().filter(|&&id| id != u32::MAX) {
+                seen[*id as usize] += 1;
+            }
+            assert!(
+                seen.iter().all(|&n| n == 1),
+                "W = {W}: primitives not once each"
+            );
+            for n in &c.nodes {
+                for &ch in n.child.iter().filter(|&&ch| ch != EMPTY && ch & LEAF != 0) {
+                    let (mut i, mut lanes) = ((ch & !LEAF) as usize, 0);
+                    loop {
+                        lanes += c.leaves[i].iter().filter(|&&id| id != u32::MAX).count();
+                        if !c.leaf_more[i] {
+                            break;
+                        }
+                        i += 1;
+                    }
+                    assert!(lanes as u32 <= MAX_LEAF && lanes > 0);
+                }
+            }
+        }
+        let mut store = ParamStore::new();
+        let shapes = vec![
+            grid(40, "a", 0.0, &mut store),
+            grid(7, "b", 0.5, &mut store),
+        ];
+        let accel = Accel::build_with_width(&shapes, &store, Width::Four);
+        check::<4>(&accel.bvh2, accel.prims.len());
+        check::<8>(&accel.bvh2, accel.prims.len());
     }
 
     #[test]

@@ -15,7 +15,7 @@ pub mod serialized;
 pub mod shape;
 pub mod shapes;
 
-pub use accel::Accel;
+pub use accel::{Accel, TreeStats};
 pub use instance::{Instance, ShapeGroup};
 pub use interaction::{DiffRay, Hit, PositionSample, Ray, SurfaceInteraction, SurfacePoint};
 pub use mesh::{Mesh, MeshData, MeshOptions, SkippedFaces};
