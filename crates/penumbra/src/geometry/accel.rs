@@ -19,8 +19,8 @@
 //! by the surface-area-optimal collapse of Ylitie et al. 2017 (a dynamic
 //! program over the binary tree, [`Collapse`]), and laid out so that a
 //! node's child nodes sit side by side. Triangles are two-sided (no
-//! backface culling). Analytic primitives sit in the packets as lanes flagged in a
-//! mask (zero edges), handled off the hot path.
+//! backface culling). Analytic primitives sit in the packets as lanes
+//! flagged in a mask (zero edges), handled off the hot path.
 //!
 //! After vertex positions (or sphere/disk parameters) change, [`Accel::update`]
 //! refits the binary BVH kept from the build (same topology, new boxes) and
