@@ -188,7 +188,7 @@ fn main() {
         "RESULT {{\"side\": \"penumbra\", \"kind\": \"{kind}\", \"threads\": {threads}, \"rays\": {}, \
          \"triangles\": {}, \"build_s\": {build:.6}, \"times\": [{}], \"tree\": {{\"width\": {}, \
          \"nodes\": {}, \"children\": {}, \"leaves\": {}, \"packets\": {}, \"lanes\": {}, \
-         \"sah_nodes\": {:.4}, \"sah_packets\": {:.4}}}}}",
+         \"sah_nodes\": {:.4}, \"sah_leaves\": {:.4}}}}}",
         rays.len(),
         accel.prim_count(),
         times.join(", "),
@@ -199,6 +199,6 @@ fn main() {
         st.packets,
         st.lanes,
         st.sah_nodes,
-        st.sah_packets,
+        st.sah_leaves,
     );
 }

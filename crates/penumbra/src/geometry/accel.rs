@@ -700,7 +700,7 @@ pub struct TreeStats {
     /// root's: the expected node visits (interior children) and leaf
     /// visits of a ray crossing the root box (the surface-area heuristic).
     pub sah_nodes: f32,
-    pub sah_packets: f32,
+    pub sah_leaves: f32,
 }
 
 /// Closest-hit and any-hit ray queries over all shapes of a scene.
@@ -1050,7 +1050,7 @@ impl Accel {
                         st.sah_nodes += a;
                     } else {
                         st.leaves += 1;
-                        st.sah_packets += a;
+                        st.sah_leaves += a;
                     }
                 }
             }
