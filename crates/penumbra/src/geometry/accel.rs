@@ -154,6 +154,12 @@ impl<const W: usize> Node<W> {
             self.b[1][a][slot] = bb.max[a];
         }
     }
+
+    /// The box of the child in slot `k`.
+    fn child_box(&self, k: usize) -> Aabb {
+        let side = |s: usize| Vec3::new(self.b[s][0][k], self.b[s][1][k], self.b[s][2][k]);
+        Aabb::new(side(0).into(), side(1).into())
+    }
 }
 
 /// The box test of a node against one ray.
@@ -520,6 +526,12 @@ struct Collapse<'a, const W: usize> {
 const NODE_COST: f32 = 1.0;
 const PACKET_COST: f32 = 0.5;
 
+/// SAH cost of a leaf of `count` primitives (in packets of four) whose
+/// box has half area `area`.
+fn leaf_cost(area: f32, count: u32) -> f32 {
+    area * PACKET_COST * count.div_ceil(4) as f32
+}
+
 impl<const W: usize> Collapse<'_, W> {
     fn new(bvh2: &Bvh2) -> Collapse<'_, W> {
         let n = bvh2.nodes.len();
@@ -568,7 +580,7 @@ impl<const W: usize> Collapse<'_, W> {
         if n.is_leaf() {
             let count = n.prim_count;
             self.count[i] = count;
-            self.cost[i] = [area * PACKET_COST * count.div_ceil(4) as f32; W];
+            self.cost[i] = [leaf_cost(area, count); W];
             self.form[i] = [Form::Leaf; W];
             return;
         }
@@ -589,7 +601,7 @@ impl<const W: usize> Collapse<'_, W> {
             }
         }
         let leaf = if count <= MAX_LEAF {
-            area * PACKET_COST * count.div_ceil(4) as f32
+            leaf_cost(area, count)
         } else {
             f32::INFINITY
         };
@@ -1030,11 +1042,10 @@ impl Accel {
     pub fn stats(&self) -> TreeStats {
         fn walk<const W: usize>(nodes: &[Node<W>], st: &mut TreeStats) {
             let root = nodes.first().map_or(0.0, |n| {
-                let (lo, hi) = (0..W).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), k| {
-                    let b = |s: usize| Vec3::new(n.b[s][0][k], n.b[s][1][k], n.b[s][2][k]);
-                    (lo.min(b(0)), hi.max(b(1)))
-                });
-                half_area(lo, hi)
+                (0..W)
+                    .filter(|&k| n.child[k] != EMPTY)
+                    .fold(Aabb::empty(), |b, k| b.union(&n.child_box(k)))
+                    .half_area()
             });
             st.nodes = nodes.len();
             st.width = W;
@@ -1044,8 +1055,7 @@ impl Accel {
                         continue;
                     }
                     st.children += 1;
-                    let b = |s: usize| Vec3::new(n.b[s][0][k], n.b[s][1][k], n.b[s][2][k]);
-                    let a = half_area(b(0), b(1)) / root;
+                    let a = n.child_box(k).half_area() / root;
                     if n.child[k] & LEAF == 0 {
                         st.sah_nodes += a;
                     } else {
@@ -1054,10 +1064,6 @@ impl Accel {
                     }
                 }
             }
-        }
-        fn half_area(lo: Vec3, hi: Vec3) -> f32 {
-            let e = (hi - lo).max(Vec3::ZERO);
-            e.x * e.y + e.y * e.z + e.z * e.x
         }
         let mut st = TreeStats::default();
         match &self.nodes {
@@ -1585,14 +1591,7 @@ mod tests {
     /// (the root included) at `NODE_COST`, leaves at `PACKET_COST` per
     /// packet, each weighted by its box's half area.
     fn built_cost<const W: usize>(c: &Collapse<W>) -> f32 {
-        let half_area = |n: &Node<W>, k: usize| {
-            let e = Vec3::new(
-                n.b[1][0][k] - n.b[0][0][k],
-                n.b[1][1][k] - n.b[0][1][k],
-                n.b[1][2][k] - n.b[0][2][k],
-            );
-            e.x * e.y + e.y * e.z + e.z * e.x
-        };
+        let half_area = |n: &Node<W>, k: usize| n.child_box(k).half_area();
         let mut cost = c.bvh2.nodes[0].aabb().half_area() * NODE_COST;
         for n in &c.nodes {
             for k in 0..W {
