@@ -687,7 +687,11 @@ fn smooth_octahedron_silhouette_matches_finite_differences() {
     );
     let scene = load(&xml);
     let mesh = scene.shapes[0].as_mesh().unwrap();
-    assert_eq!(mesh.edges.counts(), [0, 0, 12, 0, 0], "all edges smooth");
+    assert_eq!(
+        mesh.edges(&scene.params).counts(),
+        [0, 0, 12, 0, 0],
+        "all edges smooth"
+    );
     let key = "octa.vertex_positions";
     compare_with_finite_differences(
         "smooth octahedron moved",

@@ -194,7 +194,7 @@ impl BoundarySamples for Context<'_> {
             DeltaOrigin::Point(p) => ((m - p.val()).normalize(), Eye::Point(p.val())),
             DeltaOrigin::Direction(d) => (d, Eye::Direction(d)),
         };
-        let e = &mesh.edges.edges[edge as usize];
+        let e = &mesh.edges(&primal).edges[edge as usize];
         // only an edge the light grazes casts a shadow edge (a sharp edge
         // seen from the light between two faces is shadowed on both sides)
         if !EdgeTable::is_silhouette(e, &mesh.faces, primal.data(mesh.positions), eye) {

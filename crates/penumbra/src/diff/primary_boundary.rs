@@ -405,8 +405,12 @@ fn project_segment<R: Real>(
 ) -> Option<Projected<R>> {
     match shape {
         Shape::Mesh(mesh) => {
-            let (f0, f1, p) =
-                project_edge::<R>(sensor, store, mesh, &mesh.edges.edges[index as usize])?;
+            let (f0, f1, p) = project_edge::<R>(
+                sensor,
+                store,
+                mesh,
+                &mesh.edges(store).edges[index as usize],
+            )?;
             Some((f0, f1, (p, None)))
         }
         _ => project_chord::<R>(sensor, store, shape, index),
@@ -436,9 +440,10 @@ fn segments<R: EdgeMotion>(
         let candidates: Vec<u32> = match shape {
             Shape::Mesh(mesh) => {
                 let positions = store.data(mesh.positions);
-                (0..mesh.edges.edges.len() as u32)
+                let edges = &mesh.edges(store).edges;
+                (0..edges.len() as u32)
                     .filter(|&i| {
-                        let e = &mesh.edges.edges[i as usize];
+                        let e = &edges[i as usize];
                         match e.kind {
                             EdgeKind::Inert => false,
                             EdgeKind::Smooth => {

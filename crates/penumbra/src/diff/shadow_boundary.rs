@@ -132,7 +132,7 @@ impl CandidateEdges {
             if scene.shape_emitter(s as u32).is_some() || scene.in_group(s as u32) {
                 continue;
             }
-            for (i, e) in mesh.edges.edges.iter().enumerate() {
+            for (i, e) in mesh.edges(&primal).edges.iter().enumerate() {
                 if e.kind == EdgeKind::Inert {
                     continue;
                 }
@@ -343,7 +343,7 @@ impl BoundarySamples for Context<'_> {
         };
         // a smooth edge matters only where it is a silhouette from the light
         let faces = &mesh.faces;
-        let e = &mesh.edges.edges[edge as usize];
+        let e = &mesh.edges(&primal).edges[edge as usize];
         if !EdgeTable::is_silhouette(e, faces, primal.data(mesh.positions), Eye::Direction(d)) {
             return None;
         }
@@ -433,7 +433,7 @@ impl BoundarySamples for Context<'_> {
 
 /// The world end points of edge `edge` of `mesh`, in `R`.
 pub(super) fn end_points<R: Real>(mesh: &Mesh, store: &ParamView, edge: u32) -> (V3<R>, V3<R>) {
-    let e = &mesh.edges.edges[edge as usize];
+    let e = &mesh.edges(store).edges[edge as usize];
     let (_, tri) = mesh.triangle_r::<R>(store, e.face);
     let k = e.corner as usize;
     (tri[k], tri[(k + 1) % 3])

@@ -38,7 +38,7 @@
 
 use crate::geometry::mesh::is_degenerate;
 use glam::Vec3;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// What an edge is (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -134,7 +134,8 @@ impl EdgeTable {
     /// Welds the vertices and lists every edge once with its faces.
     fn build(&mut self, faces: &[[u32; 3]], positions: &[f32]) {
         let n = positions.len() / 3;
-        let mut first: HashMap<[u32; 3], u32> = HashMap::with_capacity(n);
+        let mut first: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+        first.reserve(n);
         self.weld = (0..n as u32)
             .map(|i| {
                 *first

@@ -40,6 +40,9 @@ use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction, 
 use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use glam::{Vec2, Vec3};
+use rdst::RadixSort;
+use rustc_hash::FxHashSet;
+use std::sync::OnceLock;
 
 /// Mesh data as read from a file (object space), before validation.
 #[derive(Clone, Debug, Default)]
@@ -136,9 +139,12 @@ pub struct Mesh {
     /// position sampling and f32 hits).
     face_n: Vec<Vec3>,
     face_area2: Vec<f32>,
-    /// The welded edges and their kinds, refreshed with the areas (boxed:
-    /// the shape enum stays small).
-    pub edges: Box<EdgeTable>,
+    /// The welded edges and their kinds, built on first use by
+    /// [`Mesh::edges`] (only the boundary terms of visibility derivatives
+    /// read them, and welding a large mesh costs more than its area table)
+    /// and, once built, refreshed with the areas (boxed: the shape enum
+    /// stays small).
+    edges: OnceLock<Box<EdgeTable>>,
 }
 
 impl Mesh {
@@ -361,7 +367,7 @@ impl Mesh {
             area: 0.0,
             face_n: Vec::new(),
             face_area2: Vec::new(),
-            edges: Box::default(),
+            edges: OnceLock::new(),
         };
         mesh.update_areas(store)?;
         Ok(mesh)
@@ -425,10 +431,25 @@ impl Mesh {
             ))
         })?;
         self.area = self.area_distr.sum() as f32;
-        let normals = self.normals.map(|id| store.data(id));
-        self.edges
-            .refresh(&self.faces, store.data(self.positions), normals);
+        if let Some(edges) = self.edges.get_mut() {
+            let normals = self.normals.map(|id| store.data(id));
+            edges.refresh(&self.faces, store.data(self.positions), normals);
+        }
         Ok(())
+    }
+
+    /// The welded edges and their kinds at the positions and normals of
+    /// `store` (built on the first call, kept up to date by
+    /// [`Mesh::parameters_changed`] from then on).
+    pub fn edges(&self, store: &ParamStore) -> &EdgeTable {
+        self.edges.get_or_init(|| {
+            let normals = self.normals.map(|id| store.data(id));
+            Box::new(EdgeTable::new(
+                &self.faces,
+                store.data(self.positions),
+                normals,
+            ))
+        })
     }
 
     /// Refreshes what depends on the vertex positions after `changed`
@@ -819,7 +840,8 @@ fn remove_degenerate_faces(
     positions: &[Vec3],
 ) -> (SkippedFaces, Vec<usize>) {
     let mut skipped = SkippedFaces::default();
-    let mut seen = std::collections::HashSet::with_capacity(faces.len());
+    let mut seen = FxHashSet::default();
+    seen.reserve(faces.len());
     let mut keep = |&[a, b, c]: &[u32; 3]| {
         if a == b || b == c || a == c {
             skipped.zero_area += 1;
@@ -853,7 +875,8 @@ fn count_non_manifold_edges(faces: &[[u32; 3]]) -> usize {
             edges.push(((a as u64) << 32) | b as u64);
         }
     }
-    edges.sort_unstable();
+    // a radix sort: a mesh of millions of faces is checked at every load
+    edges.radix_sort_unstable();
     edges
         .chunk_by(|a, b| a == b)
         .filter(|run| run.len() > 2)
