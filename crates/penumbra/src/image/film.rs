@@ -153,14 +153,14 @@ impl ImageBlock {
             let (mut wx, mut wy) = ([0.0f32; CACHE], [0.0f32; CACHE]);
             filter.eval_span(i0, px, &mut wx[..nx]);
             filter.eval_span(j0, py, &mut wy[..ny]);
-            for (j, &ey) in (j0..=j1).zip(&wy[..ny]) {
+            for (dj, &ey) in wy[..ny].iter().enumerate() {
                 if ey == 0.0 {
                     continue;
                 }
-                for (i, &ex) in (i0..=i1).zip(&wx[..nx]) {
+                for (di, &ex) in wx[..nx].iter().enumerate() {
                     let w = (ey * ex) as f64;
                     if w != 0.0 {
-                        f(i, j, w);
+                        f(i0 + di as i64, j0 + dj as i64, w);
                     }
                 }
             }
@@ -191,18 +191,35 @@ impl ImageBlock {
     #[inline]
     pub fn put(&mut self, filter: &ReconstructionFilter, px: f32, py: f32, values: &[f32]) {
         debug_assert_eq!(values.len(), self.channels);
-        let c = self.channels;
-        let stride = c + 1;
+        // RGB, the common case, with its channel count known to the
+        // compiler: the additions of each of the (up to 16) pixels a
+        // sample reaches unroll
+        match <&[f32; 3]>::try_from(values) {
+            Ok(rgb) => self.put_values(filter, px, py, rgb),
+            Err(_) => self.put_values(filter, px, py, values),
+        }
+    }
+
+    #[inline(always)]
+    fn put_values<V: AsRef<[f32]> + ?Sized>(
+        &mut self,
+        filter: &ReconstructionFilter,
+        px: f32,
+        py: f32,
+        values: &V,
+    ) {
+        let values = values.as_ref();
+        let c = values.len();
         let (x0, y0, width) = (self.x0, self.y0, self.width);
         let bounds = (x0, y0, width as i64, self.height as i64);
         let data = &mut self.data[..];
         Self::footprint_in(bounds, filter, px, py, |i, j, w| {
-            let o = (((j - y0) as usize) * width + (i - x0) as usize) * stride;
-            let px = &mut data[o..o + stride];
-            for (acc, v) in px.iter_mut().zip(values) {
+            let o = (((j - y0) as usize) * width + (i - x0) as usize) * (c + 1);
+            let (sums, weight) = data[o..o + c + 1].split_at_mut(c);
+            for (acc, v) in sums.iter_mut().zip(values) {
                 *acc += w * *v as f64;
             }
-            px[c] += w;
+            weight[0] += w;
         });
     }
 
