@@ -1454,6 +1454,73 @@ mod tests {
         w
     }
 
+    /// Whether the ray overlaps `bb` on `[tmin, tmax]` by more than the
+    /// rounding of an f64 slab test (f32 inputs: the differences `b - o`
+    /// are exact in f64).
+    fn overlaps_clearly(bb: &Aabb, ray: &Ray) -> bool {
+        let (mut t0, mut t1) = (ray.tmin as f64, ray.tmax as f64);
+        for a in 0..3 {
+            let (o, d) = (ray.o[a] as f64, ray.d[a] as f64);
+            let (lo, hi) = (bb.min[a] as f64, bb.max[a] as f64);
+            let (n, f) = ((lo - o) / d, (hi - o) / d);
+            t0 = t0.max(n.min(f));
+            t1 = t1.min(n.max(f));
+        }
+        t0 < t1 - 1e-12 * t1.abs()
+    }
+
+    /// Neither box test misses a box the ray clearly overlaps, for rays
+    /// that start far from the world's origin just before small boxes (a
+    /// bounce ray leaving a surface at 10⁴): there the FMA form
+    /// `b · inv - o · inv` with `o · inv` rounded to nearest misses boxes
+    /// (its error scales with the origin, not with the distance; checked:
+    /// this test fails with it), and `(b - o) · inv` must not.
+    #[test]
+    fn box_tests_are_conservative_far_from_the_origin() {
+        let mut rng = Rng(5);
+        let mut overlapping = 0;
+        for _ in 0..20000 {
+            let o = Vec3::new(rng.f() - 0.5, rng.f() - 0.5, rng.f() - 0.5) * 2e4;
+            let ray = Ray::new(o, rng.dir());
+            let tr = TRay::new(&ray);
+            let boxes: Vec<Aabb> = (0..8)
+                .map(|_| {
+                    // centred 1e-4 to 1e-2 ahead, half-widths up to 2e-3
+                    // (f32 spacing at 1e4: 1e-3)
+                    let c = ray.at(1e-4 * 100f32.powf(rng.f()));
+                    let h = Vec3::new(rng.f(), rng.f(), rng.f()) * 2e-3;
+                    Aabb::new((c - h).into(), (c + h).into())
+                })
+                .collect();
+            let mut n4 = [Node::<4>::EMPTY; 2];
+            for (k, bb) in boxes.iter().enumerate() {
+                n4[k / 4].set(k % 4, k as u32, bb);
+            }
+            let mask4 = n4[0].hit(&tr, ray.tmin, f32::INFINITY).0
+                | n4[1].hit(&tr, ray.tmin, f32::INFINITY).0 << 4;
+            #[cfg(target_arch = "x86_64")]
+            let mask8 = (Width::detect() == Width::Eight).then(|| {
+                let mut n8 = Node::<8>::EMPTY;
+                for (k, bb) in boxes.iter().enumerate() {
+                    n8.set(k, k as u32, bb);
+                }
+                n8.hit(&tr, ray.tmin, f32::INFINITY).0
+            });
+            #[cfg(not(target_arch = "x86_64"))]
+            let mask8: Option<u32> = None;
+            for (k, bb) in boxes.iter().enumerate() {
+                if overlaps_clearly(bb, &ray) {
+                    overlapping += 1;
+                    assert!(mask4 & 1 << k != 0, "4-wide misses {bb:?} ({ray:?})");
+                    if let Some(m) = mask8 {
+                        assert!(m & 1 << k != 0, "8-wide misses {bb:?} ({ray:?})");
+                    }
+                }
+            }
+        }
+        assert!(overlapping > 10000, "too few overlapping boxes ({overlapping})");
+    }
+
     fn check_against_brute(
         shapes: &[Shape],
         store: &ParamStore,
