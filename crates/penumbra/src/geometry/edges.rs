@@ -31,10 +31,11 @@
 //! Texture seams are assumed continuous (the texture agrees on both sides),
 //! so a uv seam alone does not make an edge sharp.
 //!
-//! The table is built at load and refreshed when the positions change:
-//! the kinds are recomputed, and the welding is redone if vertices that were
-//! welded no longer coincide (a change of topology as the edges see it).
-//! Vertices that come to coincide after load stay distinct until then.
+//! The table is built on first use (`Mesh::edges`) and from then on
+//! refreshed when the positions change: the kinds are recomputed, and the
+//! welding is redone if vertices that were welded no longer coincide (a
+//! change of topology as the edges see it). Vertices that come to
+//! coincide after the table was built stay distinct until then.
 
 use crate::geometry::mesh::is_degenerate;
 use glam::Vec3;
