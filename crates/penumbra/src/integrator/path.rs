@@ -94,7 +94,8 @@ impl PathIntegrator {
         // its uses there; set in place at each vertex
         let mut bsdf_ctx = BsdfContext::empty();
         loop {
-            let (Some(h), Some(si)) = (hit, vertex) else {
+            // (borrowed: a surface interaction is a few hundred bytes)
+            let (Some(h), Some(si)) = (hit, vertex.as_ref()) else {
                 // escaped: environment emission
                 if let Some(env) = scene.environment {
                     if !(self.hide_emitters && depth == 0) {
@@ -115,7 +116,7 @@ impl PathIntegrator {
             // emission of a surface hit by the previous BSDF sample
             if let Some(em) = scene.shape_emitter(h.shape) {
                 if !(self.hide_emitters && depth == 0) {
-                    let le = scene.emitters[em as usize].eval_surface(store, &si);
+                    let le = scene.emitters[em as usize].eval_surface(store, si);
                     if !le.is_zero() {
                         let w = if prev_delta {
                             1.0
@@ -138,12 +139,12 @@ impl PathIntegrator {
                 return result;
             }
             let bsdf = scene.shape_bsdf(h.shape);
-            bsdf_ctx.set(bsdf, store, &si);
+            bsdf_ctx.set(bsdf, store, si);
 
             // next-event estimation
             let u_light = rng.next_2d();
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
-                if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u_light) {
+                if let Some(es) = scene.sample_emitter_direction::<R>(store, si, u_light) {
                     let wo = si.to_local(es.d);
                     let f = bsdf_ctx.eval(wo);
                     if !f.is_zero() {
@@ -163,7 +164,7 @@ impl PathIntegrator {
             let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 return result;
             };
-            let bounce = scatter(scene, store, &bsdf_ctx, &si, &bs);
+            let bounce = scatter(scene, store, &bsdf_ctx, si, &bs);
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;
