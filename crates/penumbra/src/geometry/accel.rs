@@ -408,14 +408,19 @@ impl<'a> Stack<'a> {
 }
 
 /// Runs `f` with a stack buffer of at least `size` entries: on the machine
-/// stack when [`STACK`] suffices, else on the heap.
+/// stack when [`STACK`] suffices, else on the heap. `f` has one call site,
+/// so that the traversal it runs is inlined here rather than called.
 #[inline(always)]
 fn with_stack<T>(size: usize, f: impl FnOnce(Stack) -> T) -> T {
-    if size <= STACK {
-        f(Stack::new(&mut [const { MaybeUninit::uninit() }; STACK]))
+    let mut local = [const { MaybeUninit::uninit() }; STACK];
+    let mut heap = Vec::new();
+    let buf: &mut [MaybeUninit<(u32, f32)>] = if size <= STACK {
+        &mut local
     } else {
-        f(Stack::new(&mut vec![MaybeUninit::uninit(); size]))
-    }
+        heap.resize(size, MaybeUninit::uninit());
+        &mut heap
+    };
+    f(Stack::new(buf))
 }
 
 /// Node `i` of `nodes`, a child index read from the tree.
@@ -1519,6 +1524,14 @@ mod tests {
             }
         }
         assert!(overlapping > 10000, "too few overlapping boxes ({overlapping})");
+    }
+
+    /// A tree deeper than the machine-stack buffer allows gets a heap
+    /// buffer of its size.
+    #[test]
+    fn stacks_fit_the_tree() {
+        assert_eq!(with_stack(3, |s| s.buf.len()), STACK);
+        assert_eq!(with_stack(STACK + 7, |s| s.buf.len()), STACK + 7);
     }
 
     fn check_against_brute(
