@@ -1523,7 +1523,10 @@ mod tests {
                 }
             }
         }
-        assert!(overlapping > 10000, "too few overlapping boxes ({overlapping})");
+        assert!(
+            overlapping > 10000,
+            "too few overlapping boxes ({overlapping})"
+        );
     }
 
     /// A tree deeper than the machine-stack buffer allows gets a heap
