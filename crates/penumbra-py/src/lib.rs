@@ -408,7 +408,7 @@ impl<'a> RayArrays<'a> {
     }
 
     /// Rays `first..first + n` (within `len()`) into `out`.
-    fn read(&self, first: usize, out: &mut Vec<Ray>, n: usize) {
+    fn read(&self, first: usize, n: usize, out: &mut Vec<Ray>) {
         let ray = Ray {
             o: Vec3::ZERO,
             d: Vec3::ZERO,
@@ -544,7 +544,7 @@ impl PyScene {
                 .enumerate()
                 .with_max_len(1)
                 .for_each_init(Vec::new, |buf, (task, (((t, shape), prim), uv))| {
-                    rays.read(task * RAYS_PER_TASK, buf, t.len());
+                    rays.read(task * RAYS_PER_TASK, t.len(), buf);
                     for (k, (t, ray)) in t.iter_mut().zip(buf.iter()).enumerate() {
                         let h = scene.intersect(ray);
                         let (s, p, u) = h.map_or((-1, -1, Vec2::ZERO), |h| {
@@ -586,7 +586,7 @@ impl PyScene {
                 .enumerate()
                 .with_max_len(1)
                 .for_each_init(Vec::new, |buf, (task, hit)| {
-                    rays.read(task * RAYS_PER_TASK, buf, hit.len());
+                    rays.read(task * RAYS_PER_TASK, hit.len(), buf);
                     for (h, ray) in hit.iter_mut().zip(buf.iter()) {
                         *h = scene.occluded(ray);
                     }

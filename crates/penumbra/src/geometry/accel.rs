@@ -557,7 +557,8 @@ impl<const W: usize> Collapse<'_, W> {
 
     /// Collapses the whole tree: the root is node 0.
     fn run(mut self) -> Self {
-        if self.bvh2.nodes[0].is_leaf() || matches!(self.form[0][0], Form::Leaf) {
+        // (a binary leaf is always planned as a leaf)
+        if matches!(self.form[0][0], Form::Leaf) {
             // a root leaf: one node with one child
             let leaf = self.leaf(0);
             let mut n = Node::EMPTY;
