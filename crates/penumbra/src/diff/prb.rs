@@ -286,6 +286,7 @@ fn backward_pass(
     for b in &weight_blocks {
         weights.accumulate(b);
     }
+    let adjoint = weights.adjoint_image(d_image);
 
     // 2. trace every sample on recorded variables and backpropagate its
     //    adjoint radiance
@@ -309,9 +310,8 @@ fn backward_pass(
             .pop()
             .unwrap_or_else(|| TileSums::new(&offsets));
         let mut non_finite = 0usize;
-        let mut delta = [0.0f32; 3];
         layout.for_each_sample(tile, |pos, cs, rng| {
-            weights.gather_adjoint(filter, pos.x, pos.y, d_image, &mut delta);
+            let delta = adjoint.gather(filter, pos.x, pos.y);
             if delta == [0.0; 3] {
                 return;
             }

@@ -180,12 +180,6 @@ impl ImageBlock {
         }
     }
 
-    /// Offset of pixel `(i, j)`'s data.
-    #[inline(always)]
-    fn offset(&self, i: i64, j: i64) -> usize {
-        (((j - self.y0) as usize) * self.width + (i - self.x0) as usize) * (self.channels + 1)
-    }
-
     /// Splats a sample at continuous crop-window position `(px, py)` to
     /// every pixel of the block the filter reaches.
     #[inline]
@@ -223,31 +217,33 @@ impl ImageBlock {
         });
     }
 
-    /// The adjoint of splatting then developing: for a sample at `(px, py)`,
-    /// `Σ_p d_image[p] · w_p / W_p` over the pixels p it reaches, where
-    /// `W_p` is pixel p's total filter weight (the weight channel of this
-    /// block, which must hold the whole crop window) and `d_image` is
-    /// `∂loss/∂pixel` with `out.len()` channels.
-    pub fn gather_adjoint(
-        &self,
-        filter: &ReconstructionFilter,
-        px: f32,
-        py: f32,
-        d_image: &[f32],
-        out: &mut [f32],
-    ) {
-        let c = out.len();
-        out.fill(0.0);
-        self.footprint(filter, px, py, |i, j, w| {
-            let total = self.data[self.offset(i, j) + self.channels];
-            if total != 0.0 {
-                let k = ((j - self.y0) as usize * self.width + (i - self.x0) as usize) * c;
-                let s = (w / total) as f32;
-                for (o, d) in out.iter_mut().zip(&d_image[k..k + c]) {
-                    *o += d * s;
+    /// The adjoint of developing, for the adjoint of splatting
+    /// ([`AdjointImage::gather`]): `d_image[p] / W_p` per pixel p and
+    /// channel, where `W_p` is pixel p's total filter weight (the weight
+    /// channel of this block, which must hold the whole crop window) and
+    /// `d_image` is `∂loss/∂pixel`, RGB, row-major; zero where no sample
+    /// reached the pixel. Dividing once per pixel here saves a division
+    /// per pixel reached by each sample.
+    pub fn adjoint_image(&self, d_image: &[f32]) -> AdjointImage {
+        let stride = self.channels + 1;
+        let data = self
+            .data
+            .chunks_exact(stride)
+            .zip(d_image.chunks_exact(3))
+            .map(|(px, d)| {
+                let total = px[self.channels];
+                if total != 0.0 {
+                    std::array::from_fn(|c| (d[c] as f64 / total) as f32)
+                } else {
+                    [0.0; 3]
                 }
-            }
-        });
+            })
+            .collect();
+        AdjointImage {
+            bounds: (self.x0, self.y0, self.width as i64, self.height as i64),
+            width: self.width,
+            data,
+        }
     }
 
     /// Adds the overlapping part of `other` into this block.
@@ -283,6 +279,33 @@ impl ImageBlock {
             let inv = if w != 0.0 { 1.0 / w } else { 0.0 };
             out.extend(px[..self.channels].iter().map(|v| (v * inv) as f32));
         }
+        out
+    }
+}
+
+/// `∂loss/∂pixel` divided by each pixel's total filter weight
+/// ([`ImageBlock::adjoint_image`]).
+pub struct AdjointImage {
+    /// (x0, y0, width, height) of the crop window, as in [`ImageBlock`].
+    bounds: (i64, i64, i64, i64),
+    width: usize,
+    data: Vec<[f32; 3]>,
+}
+
+impl AdjointImage {
+    /// The adjoint of splatting then developing: the derivative of the
+    /// loss with respect to the RGB value of a sample at `(px, py)`,
+    /// `Σ_p w_p · d_image[p] / W_p` over the pixels p it reaches.
+    pub fn gather(&self, filter: &ReconstructionFilter, px: f32, py: f32) -> [f32; 3] {
+        let (x0, y0, _, _) = self.bounds;
+        let mut out = [0.0f32; 3];
+        ImageBlock::footprint_in(self.bounds, filter, px, py, |i, j, w| {
+            let a = &self.data[(j - y0) as usize * self.width + (i - x0) as usize];
+            let w = w as f32;
+            for (o, a) in out.iter_mut().zip(a) {
+                *o += w * a;
+            }
+        });
         out
     }
 }
@@ -337,6 +360,60 @@ mod tests {
         merged.accumulate(&right);
         for (a, b) in merged.develop().iter().zip(whole.develop()) {
             assert!((a - b).abs() < 1e-6);
+        }
+    }
+
+    /// Gathering is the adjoint of splatting then developing: the
+    /// derivative of `Σ_p d_image[p] · image[p]` with respect to one
+    /// sample's value, by central differences of the developed image
+    /// (linear in the value, so the difference is exact up to rounding).
+    #[test]
+    fn gather_is_the_adjoint_of_splat_and_develop() {
+        let f = ReconstructionFilter::Gaussian {
+            stddev: 0.5,
+            radius: 2.0,
+        };
+        let samples = [
+            (0.3f32, 0.7f32),
+            (1.6, 0.2),
+            (2.9, 1.9),
+            (3.5, 3.5),
+            (0.0, 3.9),
+        ];
+        let (w, h) = (4, 4);
+        let d_image: Vec<f32> = (0..w * h * 3)
+            .map(|k| ((k * 7) % 11) as f32 - 5.0)
+            .collect();
+        let loss = |values: &[[f32; 3]]| -> f64 {
+            let mut b = ImageBlock::new(0, 0, w, h, 3);
+            for (&(x, y), v) in samples.iter().zip(values) {
+                b.put(&f, x, y, v);
+            }
+            b.develop()
+                .iter()
+                .zip(&d_image)
+                .map(|(&p, &d)| p as f64 * d as f64)
+                .sum()
+        };
+        let mut weights = ImageBlock::new(0, 0, w, h, 0);
+        for &(x, y) in &samples {
+            weights.put(&f, x, y, &[]);
+        }
+        let adjoint = weights.adjoint_image(&d_image);
+        let base = [[0.25f32, 0.5, 1.0]; 5];
+        for (s, &(x, y)) in samples.iter().enumerate() {
+            let g = adjoint.gather(&f, x, y);
+            for c in 0..3 {
+                let (mut up, mut down) = (base, base);
+                up[s][c] += 0.125;
+                down[s][c] -= 0.125;
+                let fd = (loss(&up) - loss(&down)) / 0.25;
+                assert!(
+                    (g[c] as f64 - fd).abs() < 1e-5 * (1.0 + fd.abs()),
+                    "sample {s} channel {c}: {} vs {fd}",
+                    g[c]
+                );
+            }
         }
     }
 }
