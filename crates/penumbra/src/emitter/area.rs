@@ -49,6 +49,19 @@ impl Area {
         y: SurfaceInteraction<R>,
         ref_p: V3<R>,
     ) -> Option<EmitterSample<R>> {
+        let (ds, d, jacobian) = Self::direction_to(ps, &y, ref_p)?;
+        Some(self.with_radiance(store, &y, ds, d, jacobian))
+    }
+
+    /// The geometric part of [`Area::sample_from_position`]: the direction
+    /// sample, the direction in `R` and the Jacobian's derivative factor
+    /// (1 in value).
+    #[inline(always)]
+    fn direction_to<R: Real>(
+        ps: &PositionSample,
+        y: &SurfaceInteraction<R>,
+        ref_p: V3<R>,
+    ) -> Option<(DirectionSample, V3<R>, R)> {
         let to = y.p - ref_p;
         let dist2 = to.length_squared();
         if !(dist2.val() > 0.0) || !(ps.pdf > 0.0) {
@@ -68,7 +81,6 @@ impl Area {
         } else {
             R::cst(1.0)
         };
-        let l = self.radiance.eval(store, &y);
         let ds = DirectionSample {
             p: ps.p,
             n: ps.n,
@@ -77,11 +89,26 @@ impl Area {
             pdf,
             delta: false,
         };
-        Some(EmitterSample {
+        Some((ds, d, jacobian))
+    }
+
+    /// The emitter sample of direction sample `ds` towards point `y`: the
+    /// radiance there, times `jacobian / pdf`.
+    #[inline(always)]
+    fn with_radiance<R: Real>(
+        &self,
+        store: &ParamView,
+        y: &SurfaceInteraction<R>,
+        ds: DirectionSample,
+        d: V3<R>,
+        jacobian: R,
+    ) -> EmitterSample<R> {
+        let l = self.radiance.eval(store, y);
+        EmitterSample {
+            weight: l * (jacobian / ds.pdf),
             ds,
             d,
-            weight: l * (jacobian / pdf),
-        })
+        }
     }
 
     /// Solid-angle density of reaching emitter point `p` (normal `n`) along
@@ -106,19 +133,29 @@ impl EmitterT for Area {
     ) -> Option<EmitterSample<R>> {
         let shape = shapes.get(self.shape as usize)?;
         let ps = shape.sample_position_from(store, ref_p.val(), u);
-        let hit = Hit {
-            t: 0.0,
-            shape: self.shape,
-            prim: ps.prim,
-            uv: ps.local,
-            instance: None,
-        };
-        let y = if shape.moves::<R>(store) {
-            shape.point_at::<R>(store, &hit, ps.p)
-        } else {
-            surface_si(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim)
-        };
-        self.sample_from_position(store, &ps, y, ref_p)
+        if shape.moves::<R>(store) {
+            let hit = Hit {
+                t: 0.0,
+                shape: self.shape,
+                prim: ps.prim,
+                uv: ps.local,
+                instance: None,
+            };
+            let y = shape.point_at::<R>(store, &hit, ps.p);
+            return self.sample_from_position(store, &ps, y, ref_p);
+        }
+        if R::DIFFERENTIABLE && ![ref_p.x, ref_p.y, ref_p.z].iter().all(|c| c.is_const()) {
+            let y = surface_si::<R>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
+            return self.sample_from_position(store, &ps, y, ref_p);
+        }
+        // Nothing the direction depends on carries a derivative (the
+        // Jacobian's factor is then exactly 1): the geometry in f32, the
+        // same values as in `R` for a fraction of the cost; only the
+        // radiance, which may be differentiated, in `R`.
+        let y = surface_si::<f32>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
+        let (ds, d, _) = Self::direction_to(&ps, &y, V3::cst(ref_p.val()))?;
+        let y = SurfaceInteraction::cst(&y);
+        Some(self.with_radiance(store, &y, ds, V3::cst(d.val()), R::cst(1.0)))
     }
 
     /// The solid-angle form of the shape's [`ShapeT::pdf_position_from`].
