@@ -370,10 +370,7 @@ mod tests {
         let tent = ReconstructionFilter::Tent { radius: 1.0 };
         assert!(close(filter_integral(&tent, -5.0, 5.0), 1.0));
         assert!(close(filter_integral(&tent, 0.5, 5.0), 0.125));
-        let g = ReconstructionFilter::Gaussian {
-            stddev: 0.5,
-            radius: 2.0,
-        };
+        let g = ReconstructionFilter::gaussian(0.5);
         // a fine midpoint sum
         let n = 200_000;
         let sum: f64 = (0..n)

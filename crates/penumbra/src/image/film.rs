@@ -49,10 +49,7 @@ impl Film {
         // the parameter in scenes of every version and draws nothing.
         node.bool("banner", false)?;
         let rfilter = match node.children(Class::Rfilter).as_slice() {
-            [] => ReconstructionFilter::Gaussian {
-                stddev: 0.5,
-                radius: 2.0,
-            },
+            [] => ReconstructionFilter::gaussian(0.5),
             [f] => ReconstructionFilter::from_node(f)?,
             _ => return Err(node.error("more than one <rfilter>")),
         };
@@ -326,10 +323,7 @@ mod tests {
 
     #[test]
     fn gaussian_splat_reaches_two_pixels_and_is_symmetric() {
-        let f = ReconstructionFilter::Gaussian {
-            stddev: 0.5,
-            radius: 2.0,
-        };
+        let f = ReconstructionFilter::gaussian(0.5);
         assert_eq!(f.border(), 2);
         let mut b = ImageBlock::new(-2, -2, 5, 5, 1);
         b.put(&f, 0.5, 0.5, &[1.0]);
@@ -369,10 +363,7 @@ mod tests {
     /// (linear in the value, so the difference is exact up to rounding).
     #[test]
     fn gather_is_the_adjoint_of_splat_and_develop() {
-        let f = ReconstructionFilter::Gaussian {
-            stddev: 0.5,
-            radius: 2.0,
-        };
+        let f = ReconstructionFilter::gaussian(0.5);
         let samples = [
             (0.3f32, 0.7f32),
             (1.6, 0.2),

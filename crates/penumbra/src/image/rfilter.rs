@@ -13,8 +13,9 @@ pub enum ReconstructionFilter {
     /// `max(0, 1 - |x| / r)`, radius r (default 1).
     Tent { radius: f32 },
     /// Truncated Gaussian `max(0, exp(-x²/2σ²) - exp(-r²/2σ²))` with
-    /// r = 4σ (default σ = 0.5), as Mitsuba 3 defines it.
-    Gaussian { stddev: f32, radius: f32 },
+    /// r = 4σ (default σ = 0.5), as Mitsuba 3 defines it; `cut` is the
+    /// subtracted `exp(-r²/2σ²)`. Made by [`ReconstructionFilter::gaussian`].
+    Gaussian { stddev: f32, radius: f32, cut: f32 },
     /// The cubic of Mitchell and Netravali (1988, "Reconstruction filters
     /// in computer graphics") with parameters B and C, radius 2. Mitsuba's
     /// `mitchell` (default B = C = 1/3) and `catmullrom` (B = 0, C = 0.5).
@@ -33,13 +34,7 @@ impl ReconstructionFilter {
             "tent" => ReconstructionFilter::Tent {
                 radius: node.float_checked("radius", 1.0, true)?,
             },
-            "gaussian" => {
-                let stddev = node.float_checked("stddev", 0.5, true)?;
-                ReconstructionFilter::Gaussian {
-                    stddev,
-                    radius: 4.0 * stddev,
-                }
-            }
+            "gaussian" => ReconstructionFilter::gaussian(node.float_checked("stddev", 0.5, true)?),
             "mitchell" => ReconstructionFilter::Mitchell {
                 b: node.float("B", 1.0 / 3.0)?,
                 c: node.float("C", 1.0 / 3.0)?,
@@ -57,6 +52,18 @@ impl ReconstructionFilter {
         };
         node.check_all_used()?;
         Ok(f)
+    }
+
+    /// The Gaussian of standard deviation `stddev` (pixels), cut at 4σ.
+    pub fn gaussian(stddev: f32) -> ReconstructionFilter {
+        let radius = 4.0 * stddev;
+        let alpha = -1.0 / (2.0 * stddev * stddev);
+        ReconstructionFilter::Gaussian {
+            stddev,
+            radius,
+            // once per filter, not per sample (an `exp` per row and column)
+            cut: (alpha * radius * radius).exp(),
+        }
     }
 
     pub fn radius(&self) -> f32 {
@@ -81,9 +88,9 @@ impl ReconstructionFilter {
                 }
             }
             ReconstructionFilter::Tent { radius } => (1.0 - x.abs() / radius).max(0.0),
-            ReconstructionFilter::Gaussian { stddev, radius } => {
+            ReconstructionFilter::Gaussian { stddev, cut, .. } => {
                 let alpha = -1.0 / (2.0 * stddev * stddev);
-                ((alpha * x * x).exp() - (alpha * radius * radius).exp()).max(0.0)
+                ((alpha * x * x).exp() - cut).max(0.0)
             }
             ReconstructionFilter::Mitchell { b, c } => {
                 let x = x.abs();
@@ -124,12 +131,11 @@ impl ReconstructionFilter {
     #[inline]
     pub fn eval_span(&self, first: i64, c: f32, out: &mut [f32]) {
         match self {
-            ReconstructionFilter::Gaussian { stddev, radius } => {
+            ReconstructionFilter::Gaussian { stddev, cut, .. } => {
                 let alpha = -1.0 / (2.0 * stddev * stddev);
-                let cut = (alpha * radius * radius).exp();
                 for (k, o) in out.iter_mut().enumerate() {
                     let x = (first + k as i64) as f32 + 0.5 - c;
-                    *o = ((alpha * x * x).exp() - cut).max(0.0);
+                    *o = ((alpha * x * x).exp() - *cut).max(0.0);
                 }
             }
             _ => {
@@ -227,14 +233,8 @@ mod tests {
         let filters = [
             ReconstructionFilter::Box,
             ReconstructionFilter::Tent { radius: 1.5 },
-            ReconstructionFilter::Gaussian {
-                stddev: 0.5,
-                radius: 2.0,
-            },
-            ReconstructionFilter::Gaussian {
-                stddev: 1.3,
-                radius: 5.2,
-            },
+            ReconstructionFilter::gaussian(0.5),
+            ReconstructionFilter::gaussian(1.3),
         ];
         for f in &filters {
             for (first, c) in [(-3i64, -1.37f32), (10, 12.01), (254, 255.999), (0, 0.5)] {

@@ -148,14 +148,7 @@ impl Sensor {
     /// in `store`.
     pub fn from_node(node: &Node, store: &mut ParamStore) -> Result<Sensor> {
         let film = match node.children(Class::Film).as_slice() {
-            [] => Film::new(
-                768,
-                576,
-                ReconstructionFilter::Gaussian {
-                    stddev: 0.5,
-                    radius: 2.0,
-                },
-            ),
+            [] => Film::new(768, 576, ReconstructionFilter::gaussian(0.5)),
             [f] => {
                 let film = Film::from_node(f)?;
                 f.check_all_used()?;
