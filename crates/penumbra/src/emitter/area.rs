@@ -144,7 +144,7 @@ impl EmitterT for Area {
             let y = shape.point_at::<R>(store, &hit, ps.p);
             return self.sample_from_position(store, &ps, y, ref_p);
         }
-        if R::DIFFERENTIABLE && ![ref_p.x, ref_p.y, ref_p.z].iter().all(|c| c.is_const()) {
+        if R::DIFFERENTIABLE && !ref_p.is_const() {
             let y = surface_si::<R>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
             return self.sample_from_position(store, &ps, y, ref_p);
         }

@@ -57,8 +57,7 @@ impl<R: Real> DiffRay<R> {
     /// Whether neither origin nor direction carries a derivative.
     #[inline(always)]
     pub fn is_const(&self) -> bool {
-        let c = |v: &V3<R>| v.x.is_const() && v.y.is_const() && v.z.is_const();
-        c(&self.o) && c(&self.d)
+        self.o.is_const() && self.d.is_const()
     }
     /// The primal ray.
     #[inline(always)]

@@ -43,8 +43,29 @@ impl<R: Real> Frame<R> {
         }
     }
 
+    /// Whether no axis carries a derivative.
+    #[inline(always)]
+    pub fn is_const(&self) -> bool {
+        self.s.is_const() && self.t.is_const() && self.n.is_const()
+    }
+
+    /// The primal frame.
+    #[inline(always)]
+    pub fn val(&self) -> Frame<f32> {
+        Frame {
+            s: V3::cst(self.s.val()),
+            t: V3::cst(self.t.val()),
+            n: V3::cst(self.n.val()),
+        }
+    }
+
     #[inline(always)]
     pub fn to_local(&self, v: V3<R>) -> V3<R> {
+        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
+            // nothing carries a derivative (most vertices of a reverse-mode
+            // path): the same values in f32, for a fraction of the cost
+            return V3::cst(self.val().to_local(V3::cst(v.val())).val());
+        }
         V3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
     }
 

@@ -43,6 +43,11 @@ impl<R: Real> V3<R> {
     pub fn val(self) -> Vec3 {
         Vec3::new(self.x.val(), self.y.val(), self.z.val())
     }
+    /// Whether no component carries a derivative.
+    #[inline(always)]
+    pub fn is_const(self) -> bool {
+        self.x.is_const() && self.y.is_const() && self.z.is_const()
+    }
     #[inline(always)]
     pub fn dot(self, o: Self) -> R {
         self.x * o.x + self.y * o.y + self.z * o.z
