@@ -238,7 +238,6 @@ impl ImageBlock {
             .collect();
         AdjointImage {
             bounds: (self.x0, self.y0, self.width as i64, self.height as i64),
-            width: self.width,
             data,
         }
     }
@@ -285,7 +284,6 @@ impl ImageBlock {
 pub struct AdjointImage {
     /// (x0, y0, width, height) of the crop window, as in [`ImageBlock`].
     bounds: (i64, i64, i64, i64),
-    width: usize,
     data: Vec<[f32; 3]>,
 }
 
@@ -294,10 +292,10 @@ impl AdjointImage {
     /// loss with respect to the RGB value of a sample at `(px, py)`,
     /// `Σ_p w_p · d_image[p] / W_p` over the pixels p it reaches.
     pub fn gather(&self, filter: &ReconstructionFilter, px: f32, py: f32) -> [f32; 3] {
-        let (x0, y0, _, _) = self.bounds;
+        let (x0, y0, width, _) = self.bounds;
         let mut out = [0.0f32; 3];
         ImageBlock::footprint_in(self.bounds, filter, px, py, |i, j, w| {
-            let a = &self.data[(j - y0) as usize * self.width + (i - x0) as usize];
+            let a = &self.data[((j - y0) * width + (i - x0)) as usize];
             let w = w as f32;
             for (o, a) in out.iter_mut().zip(a) {
                 *o += w * a;

@@ -272,19 +272,7 @@ pub(crate) fn scatter<R: Real>(
     bs: &BsdfSample<R>,
 ) -> Bounce<R> {
     let delta = bs.lobe.has(BsdfFlags::DELTA);
-    let d = if R::DIFFERENTIABLE && bs.wo.is_const() && si.sh_frame.is_const() {
-        // nothing carries a derivative (most of a reverse-mode path): the
-        // same values in f32, for a fraction of the cost
-        V3::cst(
-            si.sh_frame
-                .val()
-                .to_world(V3::cst(bs.wo.val()))
-                .normalize()
-                .val(),
-        )
-    } else {
-        si.to_world(bs.wo).normalize()
-    };
+    let d = si.to_world(bs.wo).normalize();
     let ray = si.spawn_ray(d.val());
     let hit = scene.intersect(&ray);
     if delta || !store.moves_geometry() || !R::DIFFERENTIABLE {

@@ -71,6 +71,10 @@ impl<R: Real> Frame<R> {
 
     #[inline(always)]
     pub fn to_world(&self, v: V3<R>) -> V3<R> {
+        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
+            // as in `to_local`
+            return V3::cst(self.val().to_world(V3::cst(v.val())).val());
+        }
         self.s * v.x + self.t * v.y + self.n * v.z
     }
 }
