@@ -788,6 +788,7 @@ impl ShapeT for Mesh {
 
     /// Picks a triangle by area, then a uniform point in it; the density is
     /// 1 / total area.
+    #[inline]
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
         let (f, _, ux) = self.area_distr.sample_reuse(u.x);
         let b = warp::square_to_uniform_triangle(Vec2::new(ux, u.y));

@@ -240,6 +240,7 @@ impl ShapeT for Shape {
             Shape::Cylinder(c) => c.sample_position(store, u),
         }
     }
+    #[inline]
     fn sample_position_from(&self, store: &ParamStore, ref_p: Vec3, u: Vec2) -> PositionSample {
         match self {
             Shape::Mesh(m) => m.sample_position_from(store, ref_p, u),

@@ -14,8 +14,15 @@ pub enum ReconstructionFilter {
     Tent { radius: f32 },
     /// Truncated Gaussian `max(0, exp(-x²/2σ²) - exp(-r²/2σ²))` with
     /// r = 4σ (default σ = 0.5), as Mitsuba 3 defines it; `cut` is the
-    /// subtracted `exp(-r²/2σ²)`. Made by [`ReconstructionFilter::gaussian`].
-    Gaussian { stddev: f32, radius: f32, cut: f32 },
+    /// subtracted `exp(-r²/2σ²)`, `step` = `exp(-1/σ²)` (see
+    /// [`ReconstructionFilter::eval_span`]). Made by
+    /// [`ReconstructionFilter::gaussian`].
+    Gaussian {
+        stddev: f32,
+        radius: f32,
+        cut: f32,
+        step: f32,
+    },
     /// The cubic of Mitchell and Netravali (1988, "Reconstruction filters
     /// in computer graphics") with parameters B and C, radius 2. Mitsuba's
     /// `mitchell` (default B = C = 1/3) and `catmullrom` (B = 0, C = 0.5).
@@ -63,6 +70,7 @@ impl ReconstructionFilter {
             radius,
             // once per filter, not per sample (an `exp` per row and column)
             cut: (alpha * radius * radius).exp(),
+            step: (2.0 * alpha).exp(),
         }
     }
 
@@ -131,11 +139,28 @@ impl ReconstructionFilter {
     #[inline]
     pub fn eval_span(&self, first: i64, c: f32, out: &mut [f32]) {
         match self {
-            ReconstructionFilter::Gaussian { stddev, cut, .. } => {
+            ReconstructionFilter::Gaussian {
+                stddev, cut, step, ..
+            } => {
+                // g(x) = exp(αx²) at x = x₀ + k from two exponentials: the
+                // ratio of neighbours g(x + 1) / g(x) = exp(α(2x + 1)) is
+                // itself a geometric sequence of ratio exp(2α) (`step`).
+                // A few roundings of a product (not the ~30 instructions of
+                // an `exp`) per weight; computed only when there is a
+                // second weight, since for a narrow filter (σ < 0.125) the
+                // ratio alone may overflow.
                 let alpha = -1.0 / (2.0 * stddev * stddev);
-                for (k, o) in out.iter_mut().enumerate() {
-                    let x = (first + k as i64) as f32 + 0.5 - c;
-                    *o = ((alpha * x * x).exp() - *cut).max(0.0);
+                let x0 = first as f32 + 0.5 - c;
+                let mut g = (alpha * x0 * x0).exp();
+                let mut ratio = if out.len() > 1 {
+                    (alpha * (2.0 * x0 + 1.0)).exp()
+                } else {
+                    0.0
+                };
+                for o in out.iter_mut() {
+                    *o = (g - *cut).max(0.0);
+                    g *= ratio;
+                    ratio *= *step;
                 }
             }
             _ => {
@@ -228,8 +253,15 @@ mod tests {
         }
     }
 
+    /// `eval_span` gives `eval`'s values: bit for bit, except for the
+    /// Gaussian, whose span multiplies neighbours' ratios instead of
+    /// taking an `exp` per pixel. Both are then within a relative
+    /// (|αx²| + 2k + 4) · ε of exp(αx²) (the rounding of the argument, of
+    /// `exp`, and of the k products up to pixel k), at most 44ε for the
+    /// offsets below (|αx²| ≤ 24, k ≤ 8): they agree to 100ε of the value
+    /// before the cut-off is subtracted.
     #[test]
-    fn eval_span_equals_eval_exactly() {
+    fn eval_span_equals_eval() {
         let filters = [
             ReconstructionFilter::Box,
             ReconstructionFilter::Tent { radius: 1.5 },
@@ -242,12 +274,14 @@ mod tests {
                 f.eval_span(first, c, &mut out);
                 for (k, &v) in out.iter().enumerate() {
                     let want = f.eval((first + k as i64) as f32 + 0.5 - c);
-                    assert_eq!(
-                        v.to_bits(),
-                        want.to_bits(),
-                        "{f:?} at pixel {}",
-                        first + k as i64
-                    );
+                    let at = first + k as i64;
+                    match f {
+                        ReconstructionFilter::Gaussian { cut, .. } => assert!(
+                            (v - want).abs() <= 100.0 * f32::EPSILON * (want + cut),
+                            "{f:?} at pixel {at}: {v} against {want}"
+                        ),
+                        _ => assert_eq!(v.to_bits(), want.to_bits(), "{f:?} at pixel {at}"),
+                    }
                 }
             }
         }

@@ -74,24 +74,24 @@ impl DiscreteDistribution {
             return (0, 1.0, u.clamp(0.0, 1.0 - f32::EPSILON));
         }
         let u64 = u as f64;
-        // first index i with cdf[i+1] > u, among entries of non-zero mass
+        // i with cdf[i] ≤ u < cdf[i + 1]
         let mut i = if n <= 16 {
             // a few entries (emitters, a rectangle's triangles): a scan
             // without branches to mispredict beats the binary search
             self.cdf[1..n].iter().filter(|&&c| c <= u64).count()
         } else {
-            self.cdf.partition_point(|&c| c <= u64).saturating_sub(1)
+            self.cdf
+                .partition_point(|&c| c <= u64)
+                .saturating_sub(1)
+                .min(n - 1)
         };
-        i = i.min(n - 1);
-        while i + 1 < n && self.cdf[i + 1] <= u64 {
-            i += 1;
-        }
         // skip zero-mass entries backwards (u rounded onto their boundary)
         while self.pmf[i] == 0.0 && i > 0 {
             i -= 1;
         }
-        let r = ((u64 - self.cdf[i]) * self.inv_pmf[i]).clamp(0.0, 1.0 - f64::EPSILON) as f32;
-        (i, self.pmf[i], r.min(1.0 - f32::EPSILON))
+        let r = ((u64 - self.cdf[i]) * self.inv_pmf[i]) as f32;
+        // `max` first: a NaN u gives 0
+        (i, self.pmf[i], r.max(0.0).min(1.0 - f32::EPSILON))
     }
 }
 

@@ -189,10 +189,20 @@ pub struct SampleStream {
 
 impl SampleStream {
     /// The next uniform number in [0, 1).
-    #[inline]
+    #[inline(always)]
     pub fn next_1d(&mut self) -> f32 {
         let d = self.dim;
         self.dim += 1;
+        // the default sampler's draw inlined where it is drawn, the
+        // patterns out of line (a call that saves no registers for them)
+        match self.pattern {
+            Pattern::Independent => independent::uniform(self.key, self.index, d),
+            _ => self.pattern_1d(d),
+        }
+    }
+
+    #[inline(never)]
+    fn pattern_1d(&self, d: u32) -> f32 {
         let (key, index, spp) = (self.key, self.index, self.spp);
         match self.pattern {
             Pattern::Independent => independent::uniform(key, index, d),
@@ -204,10 +214,21 @@ impl SampleStream {
     }
 
     /// The next uniform point in [0, 1)².
-    #[inline]
+    #[inline(always)]
     pub fn next_2d(&mut self) -> Vec2 {
         let d = self.dim;
         self.dim += 2;
+        match self.pattern {
+            Pattern::Independent => Vec2::new(
+                independent::uniform(self.key, self.index, d),
+                independent::uniform(self.key, self.index, d + 1),
+            ),
+            _ => self.pattern_2d(d),
+        }
+    }
+
+    #[inline(never)]
+    fn pattern_2d(&self, d: u32) -> Vec2 {
         let (key, index, spp) = (self.key, self.index, self.spp);
         match self.pattern {
             Pattern::Independent => Vec2::new(
