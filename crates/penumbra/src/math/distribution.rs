@@ -90,8 +90,7 @@ impl DiscreteDistribution {
             i -= 1;
         }
         let r = ((u64 - self.cdf[i]) * self.inv_pmf[i]) as f32;
-        // `max` first: a NaN u gives 0
-        (i, self.pmf[i], r.max(0.0).min(1.0 - f32::EPSILON))
+        (i, self.pmf[i], r.clamp(0.0, 1.0 - f32::EPSILON))
     }
 }
 
