@@ -188,9 +188,9 @@ impl ImageBlock {
         let stride = values.len() + 1;
         if let Ok(rgb) = <&[f32; 3]>::try_from(values) {
             // RGB, the common case: a pixel's three sums and its weight
-            // are one [f64; 4], updated with SIMD multiply-adds (the same
-            // operations as below, the weight's as `w · 1`) instead of four
-            // scalar ones, each with a bounds check
+            // are one [f64; 4], updated with SIMD multiplies and adds (the
+            // same operations as below, the weight's as `w · 1`) instead of
+            // four scalar ones, each with a bounds check
             let v = rgb.map(f64::from);
             let v = [v[0], v[1], v[2], 1.0];
             Self::footprint_in(bounds, filter, px, py, |i, j, w| {

@@ -193,8 +193,9 @@ impl SampleStream {
     pub fn next_1d(&mut self) -> f32 {
         let d = self.dim;
         self.dim += 1;
-        // the default sampler's draw inlined where it is drawn, the
-        // patterns out of line (a call that saves no registers for them)
+        // the default sampler's draw inlined where it is drawn; the other
+        // patterns behind a call, so that the common draw pays neither a
+        // call nor the register saves the patterns' code needs
         match self.pattern {
             Pattern::Independent => independent::uniform(self.key, self.index, d),
             _ => self.pattern_1d(d),
