@@ -8,7 +8,7 @@ use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
 use crate::params::{ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
-use crate::texture::{Texture, TextureT};
+use crate::texture::{AttributeUses, Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// Radiance `radiance` (a value or a texture over the shape's uv, key
@@ -22,12 +22,20 @@ pub struct Area {
     pub radiance: Texture,
     /// Index of the shape in the scene's shape list.
     pub shape: u32,
+    /// The radiance reads the mesh's attributes (`mesh_attribute`), which
+    /// need the sampled point's triangle and barycentrics.
+    reads_mesh_attributes: bool,
 }
 
 impl Area {
     pub fn from_node(node: &Node, shape: u32, ctx: &mut LoadContext) -> Result<Area> {
+        let uses_before = ctx.state::<AttributeUses>().0.len();
         let radiance = emission_prop(node, "radiance", ctx)?;
-        Ok(Area { radiance, shape })
+        Ok(Area {
+            radiance,
+            shape,
+            reads_mesh_attributes: ctx.state::<AttributeUses>().0.len() > uses_before,
+        })
     }
 
     /// The direction sample towards position sample `ps` (area density)
@@ -133,7 +141,10 @@ impl EmitterT for Area {
     ) -> Option<EmitterSample<R>> {
         let shape = shapes.get(self.shape as usize)?;
         let ps = shape.sample_position_from(store, ref_p.val(), u);
-        if shape.moves::<R>(store) {
+        // the point as the shape's full surface interaction where the
+        // radiance reads per-vertex data or the point moves; otherwise a
+        // lighter one (no triangle, no barycentrics)
+        if self.reads_mesh_attributes || shape.moves::<R>(store) {
             let hit = Hit {
                 t: 0.0,
                 shape: self.shape,
