@@ -200,23 +200,48 @@ fn reverse_mode_matches_mitsuba_on_texture() {
 }
 
 /// Mitsuba's prbvolpath has no forward mode: the references are central
-/// finite differences (ε = 0.01, 1024 spp per side, same seeds) of scaling
-/// the albedo and σ_t of volume_homog's medium, at 128². The pixels where
-/// the box's bottom face and the ground coincide are left out (see
-/// volume_scenes).
+/// finite differences (ε = 0.01, same seeds on both sides, 32 × 256 spp)
+/// of scaling the albedo and σ_t of volume_homog's medium, at 128², made by
+/// scripts/mitsuba/make_volume_fd_refs.py with the medium's box lifted by
+/// 0.02 off the ground. On the ground, the box's bottom face and the ground
+/// are coplanar, and how a renderer breaks that tie changes the light that
+/// enters the box from below, and so the derivative at every pixel that
+/// sees the box, not only at its footprint: there Mitsuba's and our
+/// σ_t-derivatives outside the footprint differed by 2.3 % (10 standard
+/// errors) while the images agreed; lifted, they agree. The whole image is
+/// compared.
+/// Standard errors of the sums of the finite-difference references
+/// (scenes/refs/index.json, `sum_se`).
+const ALBEDO_REF_SE: f64 = 1.095;
+const SIGMA_T_REF_SE: f64 = 2.662;
+
 #[test]
 fn forward_mode_matches_finite_differences_on_homogeneous_medium() {
-    let scene = volume_scenes::load("volume_homog", &[("res", "128")]);
-    let excluded = volume_scenes::box_footprint(&scene);
-    let kept = |i: usize| !excluded[i / 3];
-    for (key, file) in [
+    let mut scene = volume_scenes::load("volume_homog", &[("res", "128")]);
+    let positions = "medium_box.vertex_positions";
+    let mut lifted = scene
+        .params
+        .data(scene.params.require(positions).unwrap())
+        .to_vec();
+    lifted
+        .iter_mut()
+        .skip(1)
+        .step_by(3)
+        .for_each(|y| *y += 0.02);
+    scene.params.set(positions, &lifted).unwrap();
+    scene.update().unwrap();
+    // (key, reference image, the standard error of its sum: the spread of
+    // the 32 chunks' sums over √32, from scenes/refs/index.json)
+    for (key, file, ref_se) in [
         (
             "medium.albedo.value.value",
-            "volume_homog_dimg_dalbedoscale_fd.exr",
+            "volume_homog_lifted_dimg_dalbedoscale_fd.exr",
+            ALBEDO_REF_SE,
         ),
         (
             "medium.sigma_t.value.value",
-            "volume_homog_dimg_dsigma_tscale_fd.exr",
+            "volume_homog_lifted_dimg_dsigma_tscale_fd.exr",
+            SIGMA_T_REF_SE,
         ),
     ] {
         // d/ds of s × the true value: the true value
@@ -225,28 +250,21 @@ fn forward_mode_matches_finite_differences_on_homogeneous_medium() {
             .data(scene.params.require(key).unwrap())
             .to_vec();
         let reference = read_image(&repo().join("scenes/refs").join(file)).unwrap();
-        let ref_sum: f64 = (0..reference.data.len())
-            .filter(|&i| kept(i))
-            .map(|i| reference.data[i] as f64)
-            .sum();
-        let batches = 8;
+        let ref_sum: f64 = reference.data.iter().map(|&v| v as f64).sum();
+        // 16 batches: Student's t with 15 degrees of freedom exceeds 4 in
+        // 0.12 % of runs (8 batches: 0.5 %)
+        let batches = 16;
         let mut sums = Vec::new();
         for b in 0..batches {
-            let d = render_forward(&scene, &[(key, &tangent)], &opts(16, 300 + b)).unwrap();
-            sums.push(
-                (0..d.data.len())
-                    .filter(|&i| kept(i))
-                    .map(|i| d.data[i] as f64)
-                    .sum(),
-            );
+            let d = render_forward(&scene, &[(key, &tangent)], &opts(32, 300 + b)).unwrap();
+            sums.push(d.data.iter().map(|&v| v as f64).sum());
         }
         let (m, se) = mean_se(&sums);
-        // the finite differences carry about the noise of 1024 spp
-        let se_total = (se * se * (1.0 + 128.0 / 1024.0)).sqrt();
-        eprintln!("{key}: sum {m:.3} ± {se:.3} (finite differences {ref_sum:.3})");
+        let se_total = (se * se + ref_se * ref_se).sqrt();
+        eprintln!("{key}: sum {m:.3} ± {se:.3} (finite differences {ref_sum:.3} ± {ref_se:.3})");
         assert!(
             (m - ref_sum).abs() < 4.0 * se_total,
-            "{key}: sum {m} ± {se} vs {ref_sum}"
+            "{key}: sum {m} ± {se} vs {ref_sum} ± {ref_se}"
         );
     }
 }
