@@ -26,11 +26,17 @@
 //! the reference's region mean has variance ≈ var(m_k)·n/N_ref. The two
 //! must agree within Z combined standard errors.
 //!
-//! Z = 4. The tile means are averages of many terms over ≥ 144 tiles, so
-//! their mean is close to normal: a false alarm has probability ≈ 6e-5.
-//! The region means use a variance estimated from K = 16 batches (15
-//! degrees of freedom): P(|t₁₅| > 4) ≈ 1e-3 per check. The seeds are
-//! fixed, so a run is reproducible.
+//! Z = 4 for the relMSE: the tile means are averages of many terms over
+//! ≥ 144 tiles, so their mean is close to normal and a false alarm has
+//! probability ≈ 6e-5. Z_MEAN = 6 for the region means: their variance is
+//! estimated from K = 16 batches, so the statistic follows Student's t
+//! with 15 degrees of freedom, whose tails are heavier: P(|t₁₅| > 4) ≈
+//! 1.2e-3, which over the ~285 region checks of the suite makes a correct
+//! renderer fail one of them in ~28 % of changes to its random numbers
+//! (it happened: a new sampler failed one quadrant at 4.2 standard errors
+//! that agreed with the reference within one at 4096 spp);
+//! P(|t₁₅| > 6) ≈ 2.4e-5, ~0.7 % over the suite. The seeds are fixed, so
+//! a run is reproducible.
 //! Scaling every render by 1.01 fails every scene (checked by hand), and
 //! so did a real 0.1–0.3 % bias of the thinlens and orthographic scenes
 //! (area lights without a BSDF reflected light; Mitsuba makes them black).
@@ -42,8 +48,10 @@ use penumbra::integrator::{render, RenderOptions, Rendered};
 use penumbra::scene::Scene;
 use std::path::Path;
 
-/// Standard errors allowed in every check.
+/// Standard errors allowed in the relMSE check.
 const Z: f64 = 4.0;
+/// Standard errors allowed in the region-mean checks (Student's t₁₅).
+const Z_MEAN: f64 = 6.0;
 /// Side of the square pixel tiles over which the relMSE excess is averaged.
 const TILE: usize = 8;
 /// Independent batches (K) of every render.
@@ -232,10 +240,10 @@ pub fn compare_excluding(
         let theirs = region_mean(&r.data, region);
         let se = (var * (1.0 / kf + ref_share)).sqrt();
         eprintln!("{name}: {rname} mean {ours:.5} vs reference {theirs:.5} (± {se:.1e})");
-        if (ours - theirs).abs() > Z * se {
+        if (ours - theirs).abs() > Z_MEAN * se {
             failures.push(format!(
                 "{rname} mean {ours:.5} differs from the reference's {theirs:.5} by more \
-                 than {Z} × stderr {se:.2e}"
+                 than {Z_MEAN} × stderr {se:.2e}"
             ));
         }
     }
