@@ -65,16 +65,9 @@ fn channel_means(emitter_samples: u32, bsdf_samples: u32, batches: u64) -> ([f64
         }
         per_batch.push(sums.map(|s| s / (img.data.len() / 3) as f64));
     }
-    let k = batches as f64;
-    let mut means = [0.0; 3];
-    let mut ses = [0.0; 3];
-    for c in 0..3 {
-        let m = per_batch.iter().map(|s| s[c]).sum::<f64>() / k;
-        let var = per_batch.iter().map(|s| (s[c] - m).powi(2)).sum::<f64>() / (k - 1.0);
-        means[c] = m;
-        ses[c] = (var / k).sqrt();
-    }
-    (means, ses)
+    let channel = |c: usize| common::mean_se(&per_batch.iter().map(|s| s[c]).collect::<Vec<_>>());
+    let stats = [channel(0), channel(1), channel(2)];
+    (stats.map(|s| s.0), stats.map(|s| s.1))
 }
 
 /// 16 batches each: the difference over its standard error follows

@@ -15,6 +15,7 @@ use penumbra::optim::Loss;
 use penumbra::scene::Scene;
 use std::path::PathBuf;
 
+mod common;
 mod volume_scenes;
 
 fn repo() -> PathBuf {
@@ -46,13 +47,6 @@ fn grad_opts(o: &RenderOptions) -> RenderOptions {
         seed: penumbra::diff::gradient_seed(o.seed),
         ..o.clone()
     }
-}
-
-fn mean_se(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
 }
 
 /// Reads a little-endian float32 .npy array (format 1.0/2.0, C order).
@@ -93,7 +87,7 @@ fn forward_mode_matches_mitsuba_on_cbox_red_wall() {
             .zip(&d.data)
             .for_each(|(a, &v)| *a += v as f64 / batches as f64);
     }
-    let (m, se) = mean_se(&sums);
+    let (m, se) = common::mean_se(&sums);
     // the reference (512 spp) has about a third of the noise of 128 spp
     let se_total = (se * se * (1.0 + 128.0 / 512.0)).sqrt();
     let rel_l2 = (image
@@ -135,7 +129,7 @@ fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
         }
     }
     for c in 0..3 {
-        let (m, se) = mean_se(&per_channel[c]);
+        let (m, se) = common::mean_se(&per_channel[c]);
         let tol = 4.0 * (se * se + mitsuba_se * mitsuba_se).sqrt();
         eprintln!(
             "reverse channel {c}: {m:.4e} ± {se:.1e} (Mitsuba {:.4e})",
@@ -173,7 +167,7 @@ fn reverse_mode_matches_mitsuba_on_texture() {
             .zip(g)
             .for_each(|(a, &v)| *a += v as f64 / batches as f64);
     }
-    let (m, se) = mean_se(&sums);
+    let (m, se) = common::mean_se(&sums);
     let ref_sum: f64 = reference.iter().map(|&v| v as f64).sum();
     let dot: f64 = grad
         .iter()
@@ -259,7 +253,7 @@ fn forward_mode_matches_finite_differences_on_homogeneous_medium() {
             let d = render_forward(&scene, &[(key, &tangent)], &opts(32, 300 + b)).unwrap();
             sums.push(d.data.iter().map(|&v| v as f64).sum());
         }
-        let (m, se) = mean_se(&sums);
+        let (m, se) = common::mean_se(&sums);
         let se_total = (se * se + ref_se * ref_se).sqrt();
         eprintln!("{key}: sum {m:.3} ± {se:.3} (finite differences {ref_sum:.3} ± {ref_se:.3})");
         assert!(
@@ -307,8 +301,8 @@ fn reverse_mode_on_density_grid_matches_finite_differences_of_the_loss() {
         reverse.push(g.get(key).unwrap().iter().map(|&v| (v * base) as f64).sum());
         fd.push((loss(&plus, &o) - loss(&minus, &o)) / (2.0 * eps as f64));
     }
-    let (r, r_se) = mean_se(&reverse);
-    let (f, f_se) = mean_se(&fd);
+    let (r, r_se) = common::mean_se(&reverse);
+    let (f, f_se) = common::mean_se(&fd);
     let mitsuba: f64 = read_npy(&repo().join("scenes/refs/volume_hetero_dL_ddensity.npy"))
         .iter()
         .map(|&v| (v * base) as f64)

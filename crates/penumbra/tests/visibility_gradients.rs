@@ -32,6 +32,8 @@
 //!
 //! The box filter makes each pixel the plain integral over its square.
 
+mod common;
+
 use penumbra::diff::{render_backward, render_forward, translation_tangent};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
@@ -82,14 +84,6 @@ fn opts(seed: u64, spp: u32, sppp: u32) -> RenderOptions {
         seed,
         ..Default::default()
     }
-}
-
-/// Mean and standard error.
-fn stats(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
 }
 
 /// A world point's film position (pixels) in the camera of [`sensor`]:
@@ -187,7 +181,7 @@ fn triangle_area_derivative_matches_the_analytic_one() {
                 d.data.iter().map(|&x| x as f64).sum()
             })
             .collect();
-        let (mean, se) = stats(&sums);
+        let (mean, se) = common::mean_se(&sums);
         let exact = 6.0 * projected_area_derivative(tri, v, SIZE as f64);
         eprintln!("triangle moved by {v:?}: {mean:.3} ± {se:.3}, analytic {exact:.3}");
         assert!(
@@ -300,8 +294,9 @@ fn compare_moves_with_finite_differences(
         fwd.push(mean);
     }
     let n = fd[0].len();
-    let per_pixel =
-        |images: &[Vec<f64>], i: usize| stats(&images.iter().map(|im| im[i]).collect::<Vec<_>>());
+    let per_pixel = |images: &[Vec<f64>], i: usize| {
+        common::mean_se(&images.iter().map(|im| im[i]).collect::<Vec<_>>())
+    };
     let scale = (0..n)
         .map(|i| per_pixel(&fd, i).0.abs())
         .fold(0.0, f64::max);
@@ -329,7 +324,7 @@ fn compare_moves_with_finite_differences(
     let mean_z2 = z2.iter().sum::<f64>() / z2.len() as f64;
     let outliers = z2.iter().filter(|&&z| z > 16.0).count();
     let sums = |images: &[Vec<f64>]| {
-        stats(
+        common::mean_se(
             &images
                 .iter()
                 .map(|im| im.iter().sum())
@@ -989,7 +984,7 @@ fn reverse_mode_triangle_area_derivative_matches_the_analytic_one() {
                 .sum()
         })
         .collect();
-    let (mean, se) = stats(&sums);
+    let (mean, se) = common::mean_se(&sums);
     let exact = 6.0 * projected_area_derivative(tri, v, SIZE as f64);
     eprintln!("reverse mode, triangle moved by {v:?}: {mean:.3} ± {se:.3}, analytic {exact:.3}");
     assert!(

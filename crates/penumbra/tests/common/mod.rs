@@ -1,4 +1,6 @@
-//! Helpers shared by the integration tests that write small scenes inline.
+//! Helpers shared by the integration tests: small scenes written inline,
+//! batch statistics. Each test binary uses a part of them.
+#![allow(dead_code)]
 
 /// A perspective sensor looking from `origin` at the world origin (+y up)
 /// with a square `size`² `hdrfilm` (the default filter unless `rfilter`
@@ -21,4 +23,12 @@ pub fn sensor_xml(origin: &str, fov: f32, size: u32, spp: u32, rfilter: Option<&
             <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
         </sensor>"#
     )
+}
+
+/// Mean of independent batch results and its standard error.
+pub fn mean_se(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
 }
