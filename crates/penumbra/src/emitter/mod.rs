@@ -88,6 +88,11 @@ pub(crate) fn surface_si<R: Real>(
 /// point, spot, directional and constant emitters): at uv = (0, 0).
 #[inline]
 pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamView) -> Spectrum<R> {
+    // a plain value (the usual case: a constant environment is evaluated
+    // for every ray that leaves the scene) needs no interaction
+    if let Texture::Uniform(u) = t {
+        return u.value(store);
+    }
     let si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
     t.eval(store, &si)
 }
