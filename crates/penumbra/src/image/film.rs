@@ -141,6 +141,18 @@ impl ImageBlock {
         if i1 < i0 {
             return;
         }
+        if let ReconstructionFilter::Box = filter {
+            // one pixel (two or four on pixel borders), weight one: the
+            // test of `ReconstructionFilter::eval`, without the weights'
+            // tables below
+            let inside = |k: i64, c: f32| (k as f32 + 0.5 - c).abs() <= 0.5;
+            for j in (j0..=j1).filter(|&j| inside(j, py)) {
+                for i in (i0..=i1).filter(|&i| inside(i, px)) {
+                    f(i, j, 1.0);
+                }
+            }
+            return;
+        }
         // row and column weights, evaluated once per sample for
         // footprints up to 16 pixels wide
         const CACHE: usize = 16;
@@ -343,6 +355,38 @@ mod tests {
         b.put(&f, 0.9, 0.1, &[3.0]);
         b.put(&f, 1.5, 0.5, &[5.0]);
         assert_eq!(b.develop(), vec![2.0, 5.0]);
+    }
+
+    /// The footprint of a sample is the pixels of positive weight
+    /// `eval(x) · eval(y)`, with that weight, also for samples on pixel
+    /// borders and corners (where a box filter reaches two or four pixels)
+    /// and near the block's edges.
+    #[test]
+    fn footprints_weigh_pixels_by_the_filter() {
+        let filters = [
+            ReconstructionFilter::Box,
+            ReconstructionFilter::Tent { radius: 1.5 },
+        ];
+        let coords = [0.0f32, 0.5, 1.0, 1.25, 2.0, 2.5, 2.999, 3.0, 3.7, 4.0];
+        for f in &filters {
+            for &px in &coords {
+                for &py in &coords {
+                    let block = ImageBlock::new(0, 1, 4, 3, 1);
+                    let mut got = Vec::new();
+                    block.footprint(f, px, py, |i, j, w| got.push((i, j, w)));
+                    let mut want = Vec::new();
+                    for j in 1..4i64 {
+                        for i in 0..4i64 {
+                            let w = f.eval(j as f32 + 0.5 - py) * f.eval(i as f32 + 0.5 - px);
+                            if w != 0.0 {
+                                want.push((i, j, w as f64));
+                            }
+                        }
+                    }
+                    assert_eq!(got, want, "{f:?} at ({px}, {py})");
+                }
+            }
+        }
     }
 
     #[test]
