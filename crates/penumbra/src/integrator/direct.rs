@@ -119,18 +119,19 @@ impl DirectIntegrator {
                 }
             }
         }
+        let mut next = None;
         for _ in 0..self.bsdf_samples {
             let u1 = rng.next_1d();
             let u2 = rng.next_2d();
             let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 continue;
             };
-            let b = scatter(scene, store, &bsdf_ctx, &si, &bs);
+            let b = scatter(scene, store, &bsdf_ctx, &si, &bs, &mut next);
             let d = b.ray.d;
-            let (le, em_pdf) = match (b.hit, b.next) {
+            let (le, em_pdf) = match (b.hit, &next) {
                 (Some(h2), Some(si2)) => match scene.shape_emitter(h2.shape) {
                     Some(em) => {
-                        let le = scene.emitters[em as usize].eval_surface(store, &si2);
+                        let le = scene.emitters[em as usize].eval_surface(store, si2);
                         let pdf = if b.delta {
                             0.0
                         } else {

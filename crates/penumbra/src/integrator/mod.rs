@@ -236,8 +236,6 @@ pub(crate) struct Bounce<R> {
     /// along if the ray escapes.
     pub d: V3<R>,
     pub hit: Option<Hit>,
-    /// The next vertex, `wi` set (`None` if the ray escaped).
-    pub next: Option<SurfaceInteraction<R>>,
     /// `f · cos / pdf` of the bounce, with the derivatives of the
     /// parameterisation below.
     pub weight: Spectrum<R>,
@@ -264,12 +262,18 @@ pub(crate) struct Bounce<R> {
 ///
 /// When no geometry moves (material and emitter parameters only) both forms reduce to the sample's own weight and the
 /// point where the ray hits, which is what this returns then.
+///
+/// The next vertex (`wi` set; `None` if the ray escaped) is written to
+/// `next`, in place: a surface interaction is a few hundred bytes, and a
+/// path's loop keeps two (the vertex and the next) in slots it reuses,
+/// rather than moving one out of the returned value at every bounce.
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
     store: &ParamView,
     bsdf: &BsdfContext<R>,
     si: &SurfaceInteraction<R>,
     bs: &BsdfSample<R>,
+    next: &mut Option<SurfaceInteraction<R>>,
 ) -> Bounce<R> {
     let delta = bs.lobe.has(BsdfFlags::DELTA);
     let d = si.to_world(bs.wo).normalize();
@@ -282,29 +286,29 @@ pub(crate) fn scatter<R: Real>(
             tmin: ray.tmin,
             tmax: ray.tmax,
         };
+        *next = hit.map(|h| scene.surface_interaction(store, &dray, &h));
         return Bounce {
             ray,
             d,
             hit,
-            next: hit.map(|h| scene.surface_interaction(store, &dray, &h)),
             weight: bs.weight,
             delta,
         };
     }
-    let (next, wo, jacobian) = match hit {
-        Some(h) => {
-            let mut next = scene.point_at::<R>(store, &h, ray.at(h.t));
+    *next = hit.map(|h| scene.point_at::<R>(store, &h, ray.at(h.t)));
+    let (wo, jacobian) = match next {
+        Some(next) => {
             let to = next.p - si.p;
             let dist2 = to.length_squared();
             let wo = to / dist2.sqrt();
             next.set_wi(-wo);
             let g = next.area_scale * wo.dot(next.n).abs() / dist2;
-            (Some(next), wo, g / g.val())
+            (wo, g / g.val())
         }
         // towards the environment (at infinity): the world direction is the
         // constant, as for an emitter sample of the environment (both MIS
         // strategies must see it through the same map)
-        None => (None, V3::cst(d.val()), R::cst(1.0)),
+        None => (V3::cst(d.val()), R::cst(1.0)),
     };
     let f = bsdf.eval(si.to_local(wo));
     // the sample's own weight as value, the derivative of f · J / pdf
@@ -324,7 +328,6 @@ pub(crate) fn scatter<R: Real>(
         ray,
         d: wo,
         hit,
-        next,
         weight,
         delta,
     }

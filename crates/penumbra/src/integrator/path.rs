@@ -89,12 +89,20 @@ impl PathIntegrator {
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
         let mut hit = scene.intersect(&ray);
-        let mut vertex = hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h));
+        // the current vertex and the next one, in two slots that swap
+        // roles at each bounce (`scatter` writes the next vertex in place:
+        // a surface interaction is a few hundred bytes)
+        let mut slots = [
+            hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h)),
+            None,
+        ];
+        let mut current = 0;
         // the BSDF at the current vertex, its textures read once for all
         // its uses there; set in place at each vertex
         let mut bsdf_ctx = BsdfContext::empty();
         loop {
-            // (borrowed: a surface interaction is a few hundred bytes)
+            let [a, b] = &mut slots;
+            let (vertex, next) = if current == 0 { (a, b) } else { (b, a) };
             let (Some(h), Some(si)) = (hit, vertex.as_ref()) else {
                 // escaped: environment emission
                 if let Some(env) = scene.environment {
@@ -164,14 +172,14 @@ impl PathIntegrator {
             let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 return result;
             };
-            let bounce = scatter(scene, store, &bsdf_ctx, si, &bs);
+            let bounce = scatter(scene, store, &bsdf_ctx, si, &bs, next);
             throughput = throughput.mul_elem(bounce.weight);
             eta *= bs.eta;
             ray = bounce.ray;
             ray_d = bounce.d;
             prev_p = si.p.val();
             hit = bounce.hit;
-            vertex = bounce.next;
+            current = 1 - current;
             prev_pdf = bs.pdf;
             prev_delta = bounce.delta;
 
