@@ -57,20 +57,28 @@ impl Area {
         y: SurfaceInteraction<R>,
         ref_p: V3<R>,
     ) -> Option<EmitterSample<R>> {
-        let (ds, d, jacobian) = Self::direction_to(ps, &y, ref_p)?;
-        Some(self.with_radiance(store, &y, ds, d, jacobian))
+        let (ds, d, jacobian) = Self::direction_to(ps, y.p, y.n, y.area_scale, ref_p)?;
+        let l = self.radiance.eval(store, &y);
+        Some(EmitterSample {
+            weight: l * (jacobian / ds.pdf),
+            ds,
+            d,
+        })
     }
 
-    /// The geometric part of [`Area::sample_from_position`]: the direction
-    /// sample, the direction in `R` and the Jacobian's derivative factor
-    /// (1 in value).
+    /// The geometric part of [`Area::sample_from_position`], for the
+    /// sampled point at `p` (normal `n`, area scale `area_scale`, in `R`):
+    /// the direction sample, the direction in `R` and the Jacobian's
+    /// derivative factor (1 in value).
     #[inline(always)]
     fn direction_to<R: Real>(
         ps: &PositionSample,
-        y: &SurfaceInteraction<R>,
+        p: V3<R>,
+        n: V3<R>,
+        area_scale: R,
         ref_p: V3<R>,
     ) -> Option<(DirectionSample, V3<R>, R)> {
-        let to = y.p - ref_p;
+        let to = p - ref_p;
         let dist2 = to.length_squared();
         if !(dist2.val() > 0.0) || !(ps.pdf > 0.0) {
             return None;
@@ -78,13 +86,13 @@ impl Area {
         let dist = dist2.sqrt();
         let d = to / dist;
         // cosine at the emitter between its normal and the direction to ref_p
-        let cos_e = -d.dot(y.n);
+        let cos_e = -d.dot(n);
         if !(cos_e.val() > 0.0) {
             return None;
         }
         let pdf = ps.pdf * dist2.val() / cos_e.val();
         let jacobian = if R::DIFFERENTIABLE {
-            let j = y.area_scale * cos_e / dist2;
+            let j = area_scale * cos_e / dist2;
             j / j.val()
         } else {
             R::cst(1.0)
@@ -98,25 +106,6 @@ impl Area {
             delta: false,
         };
         Some((ds, d, jacobian))
-    }
-
-    /// The emitter sample of direction sample `ds` towards point `y`: the
-    /// radiance there, times `jacobian / pdf`.
-    #[inline(always)]
-    fn with_radiance<R: Real>(
-        &self,
-        store: &ParamView,
-        y: &SurfaceInteraction<R>,
-        ds: DirectionSample,
-        d: V3<R>,
-        jacobian: R,
-    ) -> EmitterSample<R> {
-        let l = self.radiance.eval(store, y);
-        EmitterSample {
-            weight: l * (jacobian / ds.pdf),
-            ds,
-            d,
-        }
     }
 
     /// Solid-angle density of reaching emitter point `p` (normal `n`) along
@@ -162,11 +151,22 @@ impl EmitterT for Area {
         // Nothing the direction depends on carries a derivative (the
         // Jacobian's factor is then exactly 1): the geometry in f32, the
         // same values as in `R` for a fraction of the cost; only the
-        // radiance, which may be differentiated, in `R`.
-        let y = surface_si::<f32>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
-        let (ds, d, _) = Self::direction_to(&ps, &y, V3::cst(ref_p.val()))?;
-        let y = SurfaceInteraction::cst(&y);
-        Some(self.with_radiance(store, &y, ds, V3::cst(d.val()), R::cst(1.0)))
+        // radiance, which may be differentiated, in `R`, and without an
+        // interaction to evaluate it at if it is a plain value.
+        let (p, n) = (V3::cst(ps.p), V3::cst(ps.n));
+        let (ds, d, _) = Self::direction_to(&ps, p, n, 1.0, V3::cst(ref_p.val()))?;
+        let l: Spectrum<R> = match &self.radiance {
+            Texture::Uniform(u) => u.value(store),
+            t => {
+                let y = surface_si::<f32>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
+                t.eval(store, &SurfaceInteraction::cst(&y))
+            }
+        };
+        Some(EmitterSample {
+            weight: l.scale(1.0 / ds.pdf),
+            ds,
+            d: V3::cst(d.val()),
+        })
     }
 
     /// The solid-angle form of the shape's [`ShapeT::pdf_position_from`].
