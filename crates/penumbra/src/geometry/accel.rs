@@ -506,8 +506,12 @@ enum Form {
 /// filled and leaves packed where the surface areas allow it.
 struct Collapse<'a, const W: usize> {
     bvh2: &'a Bvh2,
-    /// Primitives below each binary node.
+    /// Per primitive (build-order index): whether it is analytic (tested
+    /// on its own, not in a packet's SIMD lanes).
+    analytic: &'a [bool],
+    /// Primitives below each binary node, and how many are analytic.
     count: Vec<u32>,
+    analytic_count: Vec<u32>,
     /// Per binary node, for `i` slots (index `i - 1`): the least cost of
     /// its subtree in at most `i` roots, and its form.
     cost: Vec<[f32; W]>,
@@ -522,27 +526,35 @@ struct Collapse<'a, const W: usize> {
 }
 
 /// SAH cost, per unit of surface area, of visiting a wide node (its box
-/// test, ordering the hit children, the stack) and of testing one leaf
-/// packet. Measured on the 327k-triangle reference mesh against Embree's
+/// test, ordering the hit children, the stack), of testing one leaf
+/// packet, and of testing one analytic primitive of a leaf (a call, a
+/// square root and a division for a sphere, for one primitive, where a
+/// packet tests four triangles at once: costed as a node, so that the
+/// collapse gives analytic primitives leaves of their own where their
+/// boxes separate them). Measured on the 327k-triangle reference mesh against Embree's
 /// rays (`scripts/bench_rays.py`, docs/perf/traversal.md): a packet at 0.5
 /// of a node gives fuller nodes (13.8k nodes instead of 18.9k at 1.0) and
 /// the fastest traversal of 0.2–1.0; a packet costing as much as a node
 /// makes the collapse split leaves into more slots.
 const NODE_COST: f32 = 1.0;
 const PACKET_COST: f32 = 0.5;
+const ANALYTIC_COST: f32 = 1.0;
 
-/// SAH cost of a leaf of `count` primitives (in packets of four) whose
-/// box has half area `area`.
-fn leaf_cost(area: f32, count: u32) -> f32 {
-    area * PACKET_COST * count.div_ceil(4) as f32
+/// SAH cost of a leaf of `count` primitives (in packets of four), of
+/// which `analytic` are analytic, whose box has half area `area`.
+fn leaf_cost(area: f32, count: u32, analytic: u32) -> f32 {
+    area * (PACKET_COST * count.div_ceil(4) as f32 + ANALYTIC_COST * analytic as f32)
 }
 
 impl<const W: usize> Collapse<'_, W> {
-    fn new(bvh2: &Bvh2) -> Collapse<'_, W> {
+    /// `analytic[i]`: whether primitive `i` is analytic.
+    fn new<'a>(bvh2: &'a Bvh2, analytic: &'a [bool]) -> Collapse<'a, W> {
         let n = bvh2.nodes.len();
         let mut c = Collapse {
             bvh2,
+            analytic,
             count: vec![0; n],
+            analytic_count: vec![0; n],
             cost: vec![[0.0; W]; n],
             form: vec![[Form::Leaf; W]; n],
             node_split: vec![0; n],
@@ -585,8 +597,12 @@ impl<const W: usize> Collapse<'_, W> {
         let area = n.aabb().half_area();
         if n.is_leaf() {
             let count = n.prim_count;
+            let first = n.first_index as usize;
+            let ids = &self.bvh2.primitive_indices[first..first + count as usize];
+            let analytic = ids.iter().filter(|&&p| self.analytic[p as usize]).count() as u32;
             self.count[i] = count;
-            self.cost[i] = [leaf_cost(area, count); W];
+            self.analytic_count[i] = analytic;
+            self.cost[i] = [leaf_cost(area, count, analytic); W];
             self.form[i] = [Form::Leaf; W];
             return;
         }
@@ -594,7 +610,9 @@ impl<const W: usize> Collapse<'_, W> {
         self.plan(l);
         self.plan(r);
         let count = self.count[l] + self.count[r];
+        let analytic = self.analytic_count[l] + self.analytic_count[r];
         self.count[i] = count;
+        self.analytic_count[i] = analytic;
         // best[j]: the cheapest split of j + 1 slots between the children,
         // and how many of them go to the left one (k; j + 1 - k right)
         let mut best = [(f32::INFINITY, 0u8); W];
@@ -607,7 +625,7 @@ impl<const W: usize> Collapse<'_, W> {
             }
         }
         let leaf = if count <= MAX_LEAF {
-            leaf_cost(area, count)
+            leaf_cost(area, count, analytic)
         } else {
             f32::INFINITY
         };
@@ -973,19 +991,29 @@ impl Accel {
             .collect()
     }
 
+    /// Per primitive (build order): whether it is analytic (an analytic
+    /// shape's, or an instance's).
+    fn analytic_prims(&self, shapes: &[Shape]) -> Vec<bool> {
+        self.prims
+            .iter()
+            .map(|&[s, _]| !matches!(shapes.get(s as usize), Some(Shape::Mesh(_))))
+            .collect()
+    }
+
     /// Derives the wide BVH from the binary one and packs the primitives
     /// of each leaf.
     fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
+        let analytic = self.analytic_prims(shapes);
         let (leaves, more) = match self.width {
             Width::Four => {
-                let c = Collapse::<4>::new(&self.bvh2).run();
+                let c = Collapse::<4>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
                 self.nodes = Nodes::Four(c.nodes);
                 (c.leaves, c.leaf_more)
             }
             #[cfg(target_arch = "x86_64")]
             Width::Eight => {
-                let c = Collapse::<8>::new(&self.bvh2).run();
+                let c = Collapse::<8>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
                 self.nodes = Nodes::Eight(c.nodes);
                 (c.leaves, c.leaf_more)
@@ -1673,7 +1701,8 @@ mod tests {
 
     /// The SAH cost of the wide tree `Collapse` built: interior nodes
     /// (the root included) at `NODE_COST`, leaves at `PACKET_COST` per
-    /// packet, each weighted by its box's half area.
+    /// packet and `ANALYTIC_COST` per analytic lane, each weighted by its
+    /// box's half area.
     fn built_cost<const W: usize>(c: &Collapse<W>) -> f32 {
         let half_area = |n: &Node<W>, k: usize| n.child_box(k).half_area();
         let mut cost = c.bvh2.nodes[0].aabb().half_area() * NODE_COST;
@@ -1683,12 +1712,21 @@ mod tests {
                     EMPTY => {}
                     ch if ch & LEAF == 0 => cost += half_area(n, k) * NODE_COST,
                     ch => {
-                        let mut packets = 1;
+                        let (mut packets, mut analytic) = (0, 0);
                         let mut i = (ch & !LEAF) as usize;
-                        while c.leaf_more[i] {
-                            (packets, i) = (packets + 1, i + 1);
+                        loop {
+                            packets += 1;
+                            analytic += c.leaves[i]
+                                .iter()
+                                .filter(|&&id| id != u32::MAX && c.analytic[id as usize])
+                                .count();
+                            if !c.leaf_more[i] {
+                                break;
+                            }
+                            i += 1;
                         }
-                        cost += half_area(n, k) * PACKET_COST * packets as f32;
+                        cost += half_area(n, k)
+                            * (PACKET_COST * packets as f32 + ANALYTIC_COST * analytic as f32);
                     }
                 }
             }
@@ -1698,11 +1736,13 @@ mod tests {
 
     /// The collapse builds the wide tree its dynamic program planned (same
     /// SAH cost), with every primitive in exactly one lane and no leaf
-    /// above `MAX_LEAF`, at both widths.
+    /// above `MAX_LEAF`, at both widths, with and without analytic
+    /// primitives.
     #[test]
     fn collapse_builds_the_planned_tree() {
-        fn check<const W: usize>(bvh2: &Bvh2, prims: usize) {
-            let c = Collapse::<W>::new(bvh2).run();
+        fn check<const W: usize>(bvh2: &Bvh2, analytic: &[bool]) {
+            let prims = analytic.len();
+            let c = Collapse::<W>::new(bvh2, analytic).run();
             assert!(matches!(c.form[0][0], Form::Node));
             let (planned, built) = (c.cost[0][0], built_cost(&c));
             assert!(
@@ -1732,13 +1772,27 @@ mod tests {
             }
         }
         let mut store = ParamStore::new();
-        let shapes = vec![
+        let mut shapes = vec![
             grid(40, "a", 0.0, &mut store),
             grid(7, "b", 0.5, &mut store),
         ];
         let accel = Accel::build_with_width(&shapes, &store, Width::Four);
-        check::<4>(&accel.bvh2, accel.prims.len());
-        check::<8>(&accel.bvh2, accel.prims.len());
+        let analytic = accel.analytic_prims(&shapes);
+        check::<4>(&accel.bvh2, &analytic);
+        check::<8>(&accel.bvh2, &analytic);
+        for (k, (x, y)) in [(0.1, 0.2), (0.5, 0.5), (0.52, 0.5), (0.9, 0.1)]
+            .into_iter()
+            .enumerate()
+        {
+            let c = Vec3::new(x, y, 0.25);
+            let s = Sphere::new(&format!("s{k}"), c, 0.03, Mat3::IDENTITY, false, &mut store);
+            shapes.push(Shape::Sphere(s.unwrap()));
+        }
+        let accel = Accel::build_with_width(&shapes, &store, Width::Four);
+        let analytic = accel.analytic_prims(&shapes);
+        assert_eq!(analytic.iter().filter(|&&a| a).count(), 4);
+        check::<4>(&accel.bvh2, &analytic);
+        check::<8>(&accel.bvh2, &analytic);
     }
 
     #[test]
