@@ -526,18 +526,19 @@ struct Collapse<'a, const W: usize> {
 }
 
 /// SAH cost, per unit of surface area, of visiting a wide node (its box
-/// test, ordering the hit children, the stack), of testing one leaf
-/// packet, and of testing one analytic primitive of a leaf (a call, a
-/// square root and a division for a sphere, for one primitive, where a
-/// packet tests four triangles at once: costed as a node, so that the
-/// collapse gives analytic primitives leaves of their own where their
-/// boxes separate them). Measured on the 327k-triangle reference mesh against Embree's
+/// test, ordering the hit children, the stack) and of testing one leaf
+/// packet. Measured on the 327k-triangle reference mesh against Embree's
 /// rays (`scripts/bench_rays.py`, docs/perf/traversal.md): a packet at 0.5
 /// of a node gives fuller nodes (13.8k nodes instead of 18.9k at 1.0) and
 /// the fastest traversal of 0.2–1.0; a packet costing as much as a node
 /// makes the collapse split leaves into more slots.
 const NODE_COST: f32 = 1.0;
 const PACKET_COST: f32 = 0.5;
+/// SAH cost of testing one analytic primitive of a leaf: a call, a square
+/// root and a division (a sphere) for one primitive, where a packet tests
+/// four triangles at once. Costed as a node, so that the collapse gives
+/// analytic primitives leaves of their own where their boxes separate
+/// them (docs/perf/traversal.md, "Analytic primitives in leaves").
 const ANALYTIC_COST: f32 = 1.0;
 
 /// SAH cost of a leaf of `count` primitives (in packets of four), of
