@@ -1,7 +1,7 @@
 //! Mitsuba's `area` emitter: a shape that emits radiance from the side its
 //! normal points to.
 
-use super::{emission_prop, surface_si, DirectionSample, EmitterSample, EmitterT};
+use super::{emission_prop, eval_at, surface_si, DirectionSample, EmitterSample, EmitterT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
@@ -155,13 +155,9 @@ impl EmitterT for Area {
         // interaction to evaluate it at if it is a plain value.
         let (p, n) = (V3::cst(ps.p), V3::cst(ps.n));
         let (ds, d, _) = Self::direction_to(&ps, p, n, 1.0, V3::cst(ref_p.val()))?;
-        let l: Spectrum<R> = match &self.radiance {
-            Texture::Uniform(u) => u.value(store),
-            t => {
-                let y = surface_si::<f32>(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim);
-                t.eval(store, &SurfaceInteraction::cst(&y))
-            }
-        };
+        let l: Spectrum<R> = eval_at(&self.radiance, store, || {
+            surface_si(ps.p, ps.n, ps.uv, Vec3::Z, self.shape, ps.prim)
+        });
         Some(EmitterSample {
             weight: l.scale(1.0 / ds.pdf),
             ds,

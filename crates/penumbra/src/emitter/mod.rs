@@ -84,17 +84,30 @@ pub(crate) fn surface_si<R: Real>(
     }
 }
 
+/// Emission texture `t` at a point that does not move, whose interaction
+/// `si` builds: only for textures that read it. A plain value (the usual
+/// case: a constant environment, evaluated for every ray that leaves the
+/// scene, or an area light's uniform radiance at each of its samples)
+/// needs none.
+#[inline]
+pub(crate) fn eval_at<R: Real>(
+    t: &Texture,
+    store: &ParamView,
+    si: impl FnOnce() -> SurfaceInteraction<f32>,
+) -> Spectrum<R> {
+    match t {
+        Texture::Uniform(u) => u.value(store),
+        t => t.eval(store, &SurfaceInteraction::cst(&si())),
+    }
+}
+
 /// A texture evaluated where position does not matter (uniform values of
 /// point, spot, directional and constant emitters): at uv = (0, 0).
 #[inline]
 pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamView) -> Spectrum<R> {
-    // a plain value (the usual case: a constant environment is evaluated
-    // for every ray that leaves the scene) needs no interaction
-    if let Texture::Uniform(u) = t {
-        return u.value(store);
-    }
-    let si = surface_si::<R>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
-    t.eval(store, &si)
+    eval_at(t, store, || {
+        surface_si(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0)
+    })
 }
 
 /// The emitted quantity `name` of a light (`radiance`, `intensity`,

@@ -993,18 +993,18 @@ impl Accel {
     }
 
     /// Per primitive (build order): whether it is analytic (an analytic
-    /// shape's, or an instance's).
-    fn analytic_prims(&self, shapes: &[Shape]) -> Vec<bool> {
+    /// shape's, or an instance's: those `analytic_of_shape` indexes).
+    fn analytic_prims(&self) -> Vec<bool> {
         self.prims
             .iter()
-            .map(|&[s, _]| !matches!(shapes.get(s as usize), Some(Shape::Mesh(_))))
+            .map(|&[s, _]| self.analytic_of_shape[s as usize] != u32::MAX)
             .collect()
     }
 
     /// Derives the wide BVH from the binary one and packs the primitives
     /// of each leaf.
     fn finish(&mut self, shapes: &[Shape], store: &ParamStore) {
-        let analytic = self.analytic_prims(shapes);
+        let analytic = self.analytic_prims();
         let (leaves, more) = match self.width {
             Width::Four => {
                 let c = Collapse::<4>::new(&self.bvh2, &analytic).run();
@@ -1778,7 +1778,7 @@ mod tests {
             grid(7, "b", 0.5, &mut store),
         ];
         let accel = Accel::build_with_width(&shapes, &store, Width::Four);
-        let analytic = accel.analytic_prims(&shapes);
+        let analytic = accel.analytic_prims();
         check::<4>(&accel.bvh2, &analytic);
         check::<8>(&accel.bvh2, &analytic);
         for (k, (x, y)) in [(0.1, 0.2), (0.5, 0.5), (0.52, 0.5), (0.9, 0.1)]
@@ -1790,7 +1790,7 @@ mod tests {
             shapes.push(Shape::Sphere(s.unwrap()));
         }
         let accel = Accel::build_with_width(&shapes, &store, Width::Four);
-        let analytic = accel.analytic_prims(&shapes);
+        let analytic = accel.analytic_prims();
         assert_eq!(analytic.iter().filter(|&&a| a).count(), 4);
         check::<4>(&accel.bvh2, &analytic);
         check::<8>(&accel.bvh2, &analytic);
