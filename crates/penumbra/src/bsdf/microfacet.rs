@@ -14,7 +14,7 @@
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::V3;
+use crate::math::{warp, V3};
 use crate::params::{Domain, ParamView};
 use crate::scene::description::{LoadContext, Node, Value};
 use crate::texture::{Channels, Texture, TextureT};
@@ -177,8 +177,8 @@ impl MicrofacetDistribution<f32> {
                 MicrofacetType::Beckmann => (-(1.0 - u.x).max(1e-12).ln()).sqrt(),
                 MicrofacetType::Ggx => (u.x / (1.0 - u.x).max(1e-12)).sqrt(),
             };
-            let phi = 2.0 * std::f32::consts::PI * u.y;
-            let (x, y) = (r * phi.cos() * au, r * phi.sin() * av);
+            let (sin_phi, cos_phi) = warp::sin_cos_turns(u.y);
+            let (x, y) = (r * cos_phi * au, r * sin_phi * av);
             Vec3::new(-x, -y, 1.0).normalize()
         };
         (m, self.pdf(wi, m))
@@ -198,10 +198,10 @@ pub(crate) fn sample_ggx_visible(wi: Vec3, au: f32, av: f32, u: Vec2) -> Vec3 {
     };
     let t2 = vh.cross(t1);
     let r = u.x.sqrt();
-    let phi = 2.0 * std::f32::consts::PI * u.y;
-    let p1 = r * phi.cos();
+    let (sin_phi, cos_phi) = warp::sin_cos_turns(u.y);
+    let p1 = r * cos_phi;
     let s = 0.5 * (1.0 + vh.z);
-    let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * (r * phi.sin());
+    let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * (r * sin_phi);
     let nh = t1 * p1 + t2 * p2 + vh * (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
     Vec3::new(au * nh.x, av * nh.y, nh.z.max(0.0)).normalize()
 }

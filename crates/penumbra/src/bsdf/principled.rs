@@ -330,7 +330,7 @@ impl Gtr1<f32> {
         let a2 = self.alpha * self.alpha;
         let cos2 = (1.0 - a2.powf(1.0 - u.y)) / (1.0 - a2);
         let sin = (1.0 - cos2).max(0.0).sqrt();
-        let (s, c) = (2.0 * PI * u.x).sin_cos();
+        let (s, c) = warp::sin_cos_turns(u.x);
         Vec3::new(c * sin, s * sin, cos2.max(0.0).sqrt())
     }
 }

@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
-use crate::math::{Distribution2D, Spectrum, Transform, V2, V3};
+use crate::math::{warp, Distribution2D, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
@@ -147,7 +147,7 @@ impl Envmap {
     #[inline]
     pub fn uv_to_direction(uv: Vec2) -> Vec3 {
         let (sin_t, cos_t) = (uv.y * PI).sin_cos();
-        let (sin_p, cos_p) = (uv.x * 2.0 * PI).sin_cos();
+        let (sin_p, cos_p) = warp::sin_cos_turns(uv.x);
         Vec3::new(sin_p * sin_t, cos_t, -cos_p * sin_t)
     }
 
