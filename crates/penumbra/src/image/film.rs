@@ -3,6 +3,7 @@
 
 use super::rfilter::ReconstructionFilter;
 use crate::error::Result;
+use crate::math::{ceil_i64, floor_i64};
 use crate::scene::{Class, Node};
 
 /// Image geometry and reconstruction.
@@ -289,22 +290,6 @@ impl ImageBlock {
     }
 }
 
-/// `x.ceil() as i64` (saturating; NaN gives 0): the truncation corrected
-/// by a comparison, without the call to `ceilf` that a build for baseline
-/// x86-64 (no SSE4.1 `roundss`) makes.
-#[inline(always)]
-fn ceil_i64(x: f32) -> i64 {
-    let t = x as i64;
-    t.saturating_add(((t as f32) < x) as i64)
-}
-
-/// `⌊x⌋` as an integer, as [`ceil_i64`].
-#[inline(always)]
-fn floor_i64(x: f32) -> i64 {
-    let t = x as i64;
-    t.saturating_sub(((t as f32) > x) as i64)
-}
-
 /// `∂loss/∂pixel` divided by each pixel's total filter weight
 /// ([`ImageBlock::adjoint_image`]).
 pub struct AdjointImage {
@@ -334,18 +319,6 @@ impl AdjointImage {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn integer_ceil_and_floor_match_the_float_ones() {
-        let mut xs = vec![0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e-30, -1e-30];
-        xs.extend([8388607.5, -8388607.5, 16777216.0, 3e9, -3e9, 1e30, -1e30]);
-        xs.extend([f32::NAN, f32::INFINITY, f32::NEG_INFINITY]);
-        xs.extend((-400..400).map(|k| k as f32 * 0.37 + 0.01));
-        for x in xs {
-            assert_eq!(ceil_i64(x), x.ceil() as i64, "ceil {x}");
-            assert_eq!(floor_i64(x), x.floor() as i64, "floor {x}");
-        }
-    }
 
     #[test]
     fn box_filter_averages_samples_within_their_pixel() {

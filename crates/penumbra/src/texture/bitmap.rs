@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
 use crate::image::{read_image, srgb_to_linear};
-use crate::math::{Spectrum, Transform, V2, V3};
+use crate::math::{floor_i64, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
@@ -237,8 +237,8 @@ impl Bitmap {
         let (w, h) = (self.width, self.height);
         match self.filter {
             FilterType::Nearest => {
-                let x = (uv.x.val() * w as f32).floor() as i64;
-                let y = (uv.y.val() * h as f32).floor() as i64;
+                let x = floor_i64(uv.x.val() * w as f32);
+                let y = floor_i64(uv.y.val() * h as f32);
                 self.texel(store, self.wrap.wrap(x, w), self.wrap.wrap(y, h))
             }
             FilterType::Bilinear => {
@@ -295,8 +295,8 @@ impl Bitmap {
         };
         match self.filter {
             FilterType::Nearest => {
-                let x = (uv.x * w as f32).floor() as i64;
-                let y = (uv.y * h as f32).floor() as i64;
+                let x = floor_i64(uv.x * w as f32);
+                let y = floor_i64(uv.y * h as f32);
                 texel(self.wrap.wrap(x, w), self.wrap.wrap(y, h))
             }
             FilterType::Bilinear => {
@@ -320,9 +320,8 @@ impl Bitmap {
         let (w, h) = (self.width, self.height);
         let x = uv.x * w as f32 - 0.5;
         let y = uv.y * h as f32 - 0.5;
-        let (x0, y0) = (x.val().floor(), y.val().floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (x0, y0) = (floor_i64(x.val()), floor_i64(y.val()));
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
         let taps = [
             self.wrap.wrap(x0, w),
             self.wrap.wrap(x0 + 1, w),

@@ -6,7 +6,7 @@
 
 use crate::ad::Real;
 use crate::error::{Error, Result};
-use crate::math::{Spectrum, Transform, V3};
+use crate::math::{floor_i64, Spectrum, Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
 use glam::Vec3;
@@ -216,7 +216,7 @@ impl GridVolume {
             Filter::Trilinear => {
                 // per axis: the two voxels around x (wrapped) and their
                 // weights, the three axes at once
-                let lo = [floor(x.x), floor(x.y), floor(x.z)];
+                let lo = [floor_i64(x.x), floor_i64(x.y), floor_i64(x.z)];
                 let f = x - Vec3::new(lo[0] as f32, lo[1] as f32, lo[2] as f32);
                 let g = Vec3::ONE - f;
                 let pair = |a: usize| {
@@ -335,14 +335,6 @@ impl GridVolume {
         }
         cellmax
     }
-}
-
-/// ⌊x⌋, without the library call that `f32::floor` is on x86-64 without
-/// SSE 4.1 (the lookups' hot spot otherwise).
-#[inline(always)]
-fn floor(x: f32) -> i64 {
-    let i = x as i64;
-    i - ((i as f32) > x) as i64
 }
 
 /// The axis-aligned box around the image of the unit cube.
