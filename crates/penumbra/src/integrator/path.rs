@@ -92,10 +92,10 @@ impl PathIntegrator {
         // the current vertex and the next one, in two slots that swap
         // roles at each bounce (`scatter` writes the next vertex in place:
         // a surface interaction is a few hundred bytes)
-        let mut slots = [
-            hit.map(|h| scene.surface_interaction::<R>(store, &camera_ray, &h)),
-            None,
-        ];
+        let mut slots = [None, None];
+        if let Some(h) = &hit {
+            slots[0] = Some(scene.surface_interaction::<R>(store, &camera_ray, h));
+        }
         let mut current = 0;
         // the BSDF at the current vertex, its textures read once for all
         // its uses there; set in place at each vertex

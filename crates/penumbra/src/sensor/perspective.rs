@@ -33,14 +33,19 @@ impl Perspective {
         lens: (R, [R; 2]),
         pos: Vec2,
     ) -> DiffRay<R> {
-        let d = self.frustum.direction::<R>(lens, pos).normalize();
-        // the clip distances are along the view axis
-        let dz = d.z.val();
+        // v has v.z = 1: the unit direction's view-axis component is
+        // 1 / |v|, so the clip planes (along the view axis) lie at near ·
+        // |v| and far · |v| along the ray. One normalisation, after
+        // to_world (the same direction as normalising before it too): the
+        // camera ray starts every sample, and its chain of square roots
+        // and divisions was its latency.
+        let v = self.frustum.direction::<R>(lens, pos);
+        let len = v.val().length();
         DiffRay {
             o: to_world.point(crate::math::V3::zero()),
-            d: to_world.vector(d).normalize(),
-            tmin: self.frustum.near / dz,
-            tmax: self.frustum.far / dz,
+            d: to_world.vector(v).normalize(),
+            tmin: self.frustum.near * len,
+            tmax: self.frustum.far * len,
         }
     }
 }
