@@ -11,6 +11,13 @@ faster).
 
   python3 scripts/bench_vs_mitsuba.py [--scenes cbox mesh_heavy bsdfs textured]
       [--spp 64] [--reps 3] [--mitsuba-python ~/.cache/penumbra-mitsuba/venv/bin/python]
+      [--max-depth D [D ...]]
+
+--max-depth renders each scene at each of the given path depths instead of
+its own (1: camera rays and what they see; 2: plus one bounce and the
+light sampled from the first vertex; ...): where the ratio drops with the
+depth, the cost is in the bounces, where it is already low at depth 1, in
+the per-sample work (camera ray, first hit, film).
 """
 import argparse
 import json
@@ -42,6 +49,8 @@ def main():
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
     ap.add_argument('--no-scalar', action='store_true', help='skip Mitsuba scalar_rgb (slow)')
+    ap.add_argument('--max-depth', type=int, nargs='+', default=[None],
+                    help="the scenes' $max_depth values to run (default: each scene's own)")
     a = ap.parse_args()
     subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
     exe = os.path.join(TARGET, 'release', 'penumbra')
@@ -49,16 +58,21 @@ def main():
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
     rows = []
     for s in a.scenes:
-        ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
-                         '--reps', str(a.reps)])
-        llvm = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'llvm_ad_rgb',
-                         '--spp', str(a.spp), '--reps', str(a.reps)], env, 'RESULT ')
-        scalar = None if a.no_scalar else run_json(
-            [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
-             '--spp', str(a.spp), '--reps', '1'], env, 'RESULT ')
-        rows.append((s, ours, llvm, scalar))
-        print(f'{s}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} warm {llvm["warm_median_s"]:.3f}',
-              file=sys.stderr, flush=True)
+        for depth in a.max_depth:
+            ours_depth = [] if depth is None else ['-D', f'max_depth={depth}']
+            their_depth = [] if depth is None else ['--max-depth', str(depth)]
+            name = s if depth is None else f'{s}, max_depth {depth}'
+            ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
+                             '--reps', str(a.reps), *ours_depth])
+            llvm = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
+                             'llvm_ad_rgb', '--spp', str(a.spp), '--reps', str(a.reps), *their_depth],
+                            env, 'RESULT ')
+            scalar = None if a.no_scalar else run_json(
+                [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
+                 '--spp', str(a.spp), '--reps', '1', *their_depth], env, 'RESULT ')
+            rows.append((name, ours, llvm, scalar))
+            print(f'{name}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} '
+                  f'warm {llvm["warm_median_s"]:.3f}', file=sys.stderr, flush=True)
     print(f'\n| scene ({a.spp} spp, 256²) | Penumbra first s | Penumbra warm s | Penumbra peak MB '
           '| Mitsuba llvm first s | Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
           '| llvm warm / Penumbra warm | llvm first / Penumbra first | scalar / Penumbra |')

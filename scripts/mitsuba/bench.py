@@ -6,7 +6,7 @@
 """One benchmark measurement per process (so that /usr/bin/time -v gives the
 peak RSS of exactly that measurement). Prints one 'RESULT {json}' line.
 
-Usage:  bench.py TASK [--variant V] [--spp N] [--res R] [--reps K] [--save]
+Usage:  bench.py TASK [--variant V] [--spp N] [--res R] [--max-depth D] [--reps K] [--save]
                       [--extra E] [--integrator I] [--scene S] [--eps X]
 
 Tasks (see README.md for the exact definition of each):
@@ -91,6 +91,8 @@ def task_fwd(a):
     kw = {'spp': a.spp}
     if a.res:
         kw['res'] = a.res
+    if a.max_depth:
+        kw['max_depth'] = a.max_depth
     scene, load_s = C.load_scene(a.scene, **kw)
 
     def f(i):
@@ -465,6 +467,8 @@ def main():
     ap.add_argument('--scene', default='cbox')
     ap.add_argument('--spp', type=int, default=64)
     ap.add_argument('--res', type=int, default=None)
+    ap.add_argument('--max-depth', type=int, default=None,
+                    help="fwd: the scene's $max_depth (default: the scene's own)")
     ap.add_argument('--reps', type=int, default=3)
     ap.add_argument('--extra', type=int, default=0)
     ap.add_argument('--save', action='store_true')
