@@ -264,9 +264,10 @@ pub(crate) struct Bounce<R> {
 /// point where the ray hits, which is what this returns then.
 ///
 /// The next vertex (`wi` set; `None` if the ray escaped) is written to
-/// `next`, in place: a surface interaction is a few hundred bytes, and a
-/// path's loop keeps two (the vertex and the next) in slots it reuses,
-/// rather than moving one out of the returned value at every bounce.
+/// `next`: a surface interaction is a few hundred bytes, and a path's loop
+/// keeps two (the vertex and the next) in slots it reuses, rather than
+/// moving one out of the returned value at every bounce (the compiler
+/// still copies the new interaction once into the slot).
 pub(crate) fn scatter<R: Real>(
     scene: &Scene,
     store: &ParamView,

@@ -93,6 +93,9 @@ impl PathIntegrator {
         // roles at each bounce (`scatter` writes the next vertex in place:
         // a surface interaction is a few hundred bytes)
         let mut slots = [None, None];
+        // assigned into its slot: built inside an array literal, the
+        // first vertex was copied into place, a copy that waits on the
+        // stores just made (docs/perf/render_loop.md)
         if let Some(h) = &hit {
             slots[0] = Some(scene.surface_interaction::<R>(store, &camera_ray, h));
         }
