@@ -6,7 +6,7 @@ use crate::ad::Real;
 use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
-use crate::math::{warp, Distribution2D, Spectrum, Transform, V2, V3};
+use crate::math::{floor_i64, warp, Distribution2D, Spectrum, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
 use glam::{Vec2, Vec3};
@@ -140,7 +140,7 @@ impl Envmap {
     pub fn direction_to_uv<R: Real>(d: V3<R>) -> V2<R> {
         let u = d.x.atan2(-d.z) * (0.5 / PI);
         let v = d.y.acos() / PI;
-        V2::new(u - u.val().floor(), v)
+        V2::new(u - floor_i64(u.val()) as f32, v)
     }
 
     /// (u, v) → unit local direction.
@@ -157,7 +157,7 @@ impl Envmap {
     fn uv_to_grid<R: Real>(&self, uv: V2<R>) -> V2<R> {
         let x = uv.x - 0.5 / self.width as f32;
         V2::new(
-            (x - x.val().floor()) * self.width as f32,
+            (x - floor_i64(x.val()) as f32) * self.width as f32,
             uv.y.clamp(0.0, 1.0) * (self.height - 1) as f32,
         )
     }
@@ -167,8 +167,8 @@ impl Envmap {
     /// along moves when the camera or a mirror does).
     fn lookup<R: Real>(&self, store: &ParamView, g: V2<R>) -> Spectrum<R> {
         let (w, h) = (self.width, self.height);
-        let x0 = (g.x.val().floor() as usize).min(w - 1);
-        let y0 = (g.y.val().floor() as usize).min(h - 2);
+        let x0 = (floor_i64(g.x.val()).max(0) as usize).min(w - 1);
+        let y0 = (floor_i64(g.y.val()).max(0) as usize).min(h - 2);
         let (fx, fy) = (g.x - x0 as f32, g.y - y0 as f32);
         let x1 = (x0 + 1) % w;
         let t = |x: usize, y: usize| store.read3::<R>(self.data, y * w + x);
@@ -199,7 +199,7 @@ impl EmitterT for Envmap {
         }
         let w = self.width as f32;
         let uv = Vec2::new(s.x + 0.5 / w, s.y);
-        let uv = Vec2::new(uv.x - uv.x.floor(), uv.y);
+        let uv = Vec2::new(uv.x - floor_i64(uv.x) as f32, uv.y);
         let sin_theta = (s.y * PI).sin();
         if !(sin_theta > 0.0) {
             return None;

@@ -6,7 +6,7 @@ use super::{Channels, Texture, TextureT};
 use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::Spectrum;
+use crate::math::{floor_i64, Spectrum};
 use crate::params::{Domain, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node};
 
@@ -53,7 +53,7 @@ impl Checkerboard {
     #[inline]
     fn is_color0<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> bool {
         let uv = apply_to_uv(store, self.to_uv, si.uv).val();
-        let (fu, fv) = (uv.x - uv.x.floor(), uv.y - uv.y.floor());
+        let (fu, fv) = (uv.x - floor_i64(uv.x) as f32, uv.y - floor_i64(uv.y) as f32);
         (fu > 0.5) == (fv > 0.5)
     }
 }
