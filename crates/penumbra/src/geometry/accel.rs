@@ -33,6 +33,7 @@
 //! transforms the ray into the group's space and traverses the group's
 //! structure (`geometry::instance`).
 
+use crate::geometry::huge_pages::HugePageArray;
 use crate::geometry::instance::{ray_to_group_space, Instance, ShapeGroup};
 use crate::geometry::shapes::cylinder::CylinderFrame;
 use crate::geometry::shapes::disk::DiskFrame;
@@ -226,14 +227,14 @@ fn hit_node8(n: &Node<8>, tr: &TRay, tmin: f32, tmax_far: f32) -> (u32, [f32; 8]
 /// node 0.
 #[derive(Clone, Debug)]
 enum Nodes {
-    Four(Vec<Node<4>>),
+    Four(HugePageArray<Node<4>>),
     #[cfg(target_arch = "x86_64")]
-    Eight(Vec<Node<8>>),
+    Eight(HugePageArray<Node<8>>),
 }
 
 impl Default for Nodes {
     fn default() -> Nodes {
-        Nodes::Four(Vec::new())
+        Nodes::Four(HugePageArray::default())
     }
 }
 
@@ -747,7 +748,7 @@ pub struct Accel {
     width: Width,
     nodes: Nodes,
     /// Leaf packets.
-    tris: Vec<Tri4>,
+    tris: HugePageArray<Tri4>,
     /// Traversal stack size the tree needs.
     stack_size: usize,
     /// (shape, primitive) in build order.
@@ -1009,14 +1010,14 @@ impl Accel {
             Width::Four => {
                 let c = Collapse::<4>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
-                self.nodes = Nodes::Four(c.nodes);
+                self.nodes = Nodes::Four(c.nodes.into());
                 (c.leaves, c.leaf_more)
             }
             #[cfg(target_arch = "x86_64")]
             Width::Eight => {
                 let c = Collapse::<8>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
-                self.nodes = Nodes::Eight(c.nodes);
+                self.nodes = Nodes::Eight(c.nodes.into());
                 (c.leaves, c.leaf_more)
             }
             #[cfg(not(target_arch = "x86_64"))]
@@ -1069,7 +1070,8 @@ impl Accel {
                     more,
                 }
             })
-            .collect();
+            .collect::<Vec<_>>()
+            .into();
     }
 
     /// Size and fill of the wide tree (for benchmarks beside other

@@ -6,6 +6,7 @@
 
 pub mod accel;
 pub mod edges;
+mod huge_pages;
 pub mod instance;
 mod interaction;
 pub mod mesh;
