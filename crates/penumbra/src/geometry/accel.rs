@@ -1023,55 +1023,50 @@ impl Accel {
             #[cfg(not(target_arch = "x86_64"))]
             Width::Eight => unreachable!("Width::detect gives Four off x86-64"),
         };
-        self.tris = leaves
-            .iter()
-            .zip(more)
-            .map(|(ids, more)| {
-                let mut lanes = [[Vec3::ZERO; 4]; 4];
-                let mut analytic = 0u32;
-                let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
-                for (k, &id) in ids.iter().enumerate() {
-                    if id == u32::MAX {
-                        continue;
-                    }
-                    let [s, p] = self.prims[id as usize];
-                    (shape[k], prim[k]) = (s, p);
-                    match shapes.get(s as usize) {
-                        // a zero-area face keeps zero edges, like an
-                        // unused lane: never hit (see geometry::mesh)
-                        Some(Shape::Mesh(m)) if m.face_is_degenerate(p as usize) => {}
-                        Some(Shape::Mesh(m)) => {
-                            let [p0, p1, p2] = m.triangle(store, p as usize);
-                            let (e1, e2) = (p0 - p1, p2 - p0);
-                            lanes[k] = [p0, e1, e2, e1.cross(e2)];
-                        }
-                        _ => analytic |= 1 << k,
-                    }
+        self.tris = HugePageArray::from_exact_iter(leaves.iter().zip(more).map(|(ids, more)| {
+            let mut lanes = [[Vec3::ZERO; 4]; 4];
+            let mut analytic = 0u32;
+            let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
+            for (k, &id) in ids.iter().enumerate() {
+                if id == u32::MAX {
+                    continue;
                 }
-                let soa = |f: usize| {
-                    let axis = |a: usize| {
-                        Vec4::new(
-                            lanes[0][f][a],
-                            lanes[1][f][a],
-                            lanes[2][f][a],
-                            lanes[3][f][a],
-                        )
-                    };
-                    [axis(0), axis(1), axis(2)]
+                let [s, p] = self.prims[id as usize];
+                (shape[k], prim[k]) = (s, p);
+                match shapes.get(s as usize) {
+                    // a zero-area face keeps zero edges, like an
+                    // unused lane: never hit (see geometry::mesh)
+                    Some(Shape::Mesh(m)) if m.face_is_degenerate(p as usize) => {}
+                    Some(Shape::Mesh(m)) => {
+                        let [p0, p1, p2] = m.triangle(store, p as usize);
+                        let (e1, e2) = (p0 - p1, p2 - p0);
+                        lanes[k] = [p0, e1, e2, e1.cross(e2)];
+                    }
+                    _ => analytic |= 1 << k,
+                }
+            }
+            let soa = |f: usize| {
+                let axis = |a: usize| {
+                    Vec4::new(
+                        lanes[0][f][a],
+                        lanes[1][f][a],
+                        lanes[2][f][a],
+                        lanes[3][f][a],
+                    )
                 };
-                Tri4 {
-                    v0: soa(0),
-                    e1: soa(1),
-                    e2: soa(2),
-                    ng: soa(3),
-                    shape,
-                    prim,
-                    analytic,
-                    more,
-                }
-            })
-            .collect::<Vec<_>>()
-            .into();
+                [axis(0), axis(1), axis(2)]
+            };
+            Tri4 {
+                v0: soa(0),
+                e1: soa(1),
+                e2: soa(2),
+                ng: soa(3),
+                shape,
+                prim,
+                analytic,
+                more,
+            }
+        }));
     }
 
     /// Size and fill of the wide tree (for benchmarks beside other

@@ -37,20 +37,29 @@ unsafe impl<T: Copy + Sync> Sync for HugePageArray<T> {}
 
 impl<T: Copy> HugePageArray<T> {
     pub(crate) fn new(items: &[T]) -> HugePageArray<T> {
-        let bytes = std::mem::size_of_val(items);
+        HugePageArray::from_exact_iter(items.iter().copied())
+    }
+
+    /// The array of the items of `iter`, written straight into the
+    /// advised storage (no second copy of a large array alive at once).
+    pub(crate) fn from_exact_iter(iter: impl ExactSizeIterator<Item = T>) -> HugePageArray<T> {
+        let n = iter.len();
+        let bytes = n * std::mem::size_of::<T>();
+        let mut array = HugePageArray {
+            ptr: NonNull::dangling(),
+            len: 0,
+            layout: None,
+        };
         if bytes == 0 {
-            return HugePageArray {
-                ptr: NonNull::dangling(),
-                len: items.len(),
-                layout: None,
-            };
+            array.len = n;
+            return array;
         }
         let layout = if bytes >= HUGE_PAGE {
             Layout::from_size_align(bytes.next_multiple_of(HUGE_PAGE), HUGE_PAGE)
         } else {
-            Layout::array::<T>(items.len())
+            Layout::array::<T>(n)
         }
-        .expect("an array that exists in memory has a valid layout");
+        .expect("an array that fits in memory has a valid layout");
         // SAFETY: `layout` has a non-zero size.
         let raw = unsafe { alloc(layout) };
         let Some(ptr) = NonNull::new(raw.cast::<T>()) else {
@@ -59,15 +68,20 @@ impl<T: Copy> HugePageArray<T> {
         if layout.align() == HUGE_PAGE {
             advise_huge_pages(raw, layout.size());
         }
-        // SAFETY: the allocation holds `items.len()` elements of `T` (its
-        // size is at least `bytes`, its alignment at least `T`'s) and does
-        // not overlap `items`.
-        unsafe { std::ptr::copy_nonoverlapping(items.as_ptr(), ptr.as_ptr(), items.len()) };
-        HugePageArray {
-            ptr,
-            len: items.len(),
-            layout: Some(layout),
+        (array.ptr, array.layout) = (ptr, Some(layout));
+        // `len` counts the elements written, so that a panicking iterator
+        // leaves an array that frees its storage
+        for item in iter.take(n) {
+            // SAFETY: the storage holds `n` elements of `T` (its size is at
+            // least `bytes`, its alignment at least `T`'s) and `len < n`.
+            unsafe { array.ptr.as_ptr().add(array.len).write(item) };
+            array.len += 1;
         }
+        assert_eq!(
+            array.len, n,
+            "the iterator yielded fewer items than it said"
+        );
+        array
     }
 }
 
