@@ -18,7 +18,11 @@ two kinds. Origins are offset 1e-4 along the reversed incoming direction.
 What runs (each configuration in its own process, interleaved kind by
 kind and thread count by thread count so that all share the machine's
 load; each times --reps traces of all the rays of one kind after one
-untimed warm-up trace, and the median gives millions of rays per second):
+untimed warm-up trace, and the median gives millions of rays per second;
+--rounds processes per side and configuration, in rounds that run every
+side once, give the figure as their median and the ratios as the median
+of the rounds' ratios, since this kind of VM drifts by ±10 % between
+processes):
   Embree     scripts/embree_bench/bench.c, compiled here with gcc against
              Debian's libembree-dev (Embree 3): one geometry per shape,
              Embree's default build quality (RTC_BUILD_QUALITY_MEDIUM) and
@@ -268,6 +272,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=512)
     ap.add_argument("--reps", type=int, default=7)
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="processes per side and configuration, interleaved; figures are their medians")
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="the N beside 1 thread")
     ap.add_argument("--md", default=os.path.join(ROOT, "docs", "bench_rays.md"))
     ap.add_argument("--embree-robust", action="store_true", help="RTC_SCENE_FLAG_ROBUST")
@@ -297,11 +303,22 @@ def main():
                 sides.append(("python", [sys.executable] + py + ["--save", "python"], env))
                 if a.baseline_python:
                     sides.append(("base", [a.baseline_python] + py + ["--save", "base"], env))
-                for side, cmd, env in sides:
-                    r = run(cmd, env)
-                    r["mrays"] = r["rays"] / statistics.median(r["times"]) / 1e6
-                    res[side, kind, n] = r
-                print(kind, n, {s: round(res[s, kind, n]["mrays"], 2) for s, _, _ in sides}, file=sys.stderr)
+                runs = {side: [] for side, _, _ in sides}
+                for rnd in range(a.rounds):
+                    # every side once per round, the order reversed every
+                    # other round: each round's sides share one moment's load
+                    for side, cmd, env in sides if rnd % 2 == 0 else sides[::-1]:
+                        r = run(cmd, env)
+                        r["mrays"] = r["rays"] / statistics.median(r["times"]) / 1e6
+                        runs[side].append(r)
+                for side, rs in runs.items():
+                    others = [r["others"] for r in rs if "others" in r]
+                    res[side, kind, n] = dict(rs[-1], rounds=[r["mrays"] for r in rs],
+                                              mrays=statistics.median(r["mrays"] for r in rs))
+                    if others:
+                        res[side, kind, n]["others"] = max(others)
+                print(kind, n, {s: [round(m, 2) for m in res[s, kind, n]["rounds"]] for s, _, _ in sides},
+                      file=sys.stderr)
         checks = {}
         for kind, query in KINDS:
             hits = {(s, n): load_hits(tmp, s, kind, n, query) for (s, k, n) in res if k == kind}
@@ -329,7 +346,9 @@ def main():
         f"- Penumbra {rev} (rustc {rustc_v}); Embree {e1['embree']} (Debian's libembree-dev, gcc {gcc_v}, "
         f"default build quality RTC_BUILD_QUALITY_MEDIUM, {flags}); {pyv}",
         f"- scene: scenes/mesh_heavy.xml, {n_tris:,} triangles; {a.res}² rays per kind; each figure the median of "
-        f"{a.reps} traces of all the rays in one process (after loading and the tree build, not timed)",
+        f"{a.reps} traces of all the rays in one process (after loading and the tree build, not timed), "
+        f"then the median over {a.rounds} such processes per side, run in interleaved rounds; a ratio is the median of "
+        f"the rounds' ratios (each round's sides measured one after the other), with their range",
         "",
         "M rays/s; native = `Accel::intersect`/`occluded` on a rayon pool (`crates/penumbra/examples/trace_rays.rs`), "
         "Embree = `rtcIntersect1`/`rtcOccluded1` on pthreads (`scripts/embree_bench/bench.c`), "
@@ -342,10 +361,13 @@ def main():
     for kind, query in KINDS:
         for n in threads:
             m = {s: res[s, kind, n]["mrays"] for s in ("embree", "native", "python", "base") if (s, kind, n) in res}
+            def ratio(side, over):
+                rs = [x / y for x, y in zip(res[side, kind, n]["rounds"], res[over, kind, n]["rounds"])]
+                return f"{statistics.median(rs):.2f} ({min(rs):.2f}–{max(rs):.2f})"
             row = (f"| {kind} | {query} | {res['embree', kind, n]['rays']} | {n} | {m['embree']:.2f} | {m['native']:.2f} | "
-                   f"{m['native'] / m['embree']:.2f} | {m['python']:.2f} | {m['python'] / m['embree']:.2f} |")
+                   f"{ratio('native', 'embree')} | {m['python']:.2f} | {ratio('python', 'embree')} |")
             if a.baseline_python:
-                row += f" {m['base']:.2f} | {m['python'] / m['base']:.2f} |"
+                row += f" {m['base']:.2f} | {ratio('python', 'base')} |"
             others = [r["others"] for (s, k, t), r in res.items() if k == kind and t == n and "others" in r]
             row += f" {max(others):.0%} |" if others else " — |"
             lines.append(row)
