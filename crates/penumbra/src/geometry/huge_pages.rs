@@ -10,7 +10,7 @@
 //! is backed by 2 MiB pages as it is filled (a range touched first keeps
 //! its 4 KiB pages until a background thread may merge them, much later).
 //! [`HugePageArray`] allocates 2 MiB-aligned storage, advises it, and only
-//! then copies the elements in. Where the kernel refuses (THP `never`,
+//! then writes the elements into it. Where the kernel refuses (THP `never`,
 //! another OS), the array is an ordinary one.
 
 use std::alloc::{alloc, dealloc, handle_alloc_error, Layout};
@@ -21,7 +21,7 @@ use std::ptr::NonNull;
 /// gets huge pages for the 2 MiB-aligned blocks it covers).
 const HUGE_PAGE: usize = 2 << 20;
 
-/// A fixed-length array of `T`, written once from a `Vec` and then read.
+/// A fixed-length array of `T`, written once when it is made and then read.
 pub(crate) struct HugePageArray<T: Copy> {
     ptr: NonNull<T>,
     len: usize,
