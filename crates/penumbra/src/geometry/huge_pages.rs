@@ -101,7 +101,7 @@ fn advise_huge_pages(_ptr: *mut u8, _len: usize) {}
 impl<T: Copy> Drop for HugePageArray<T> {
     fn drop(&mut self) {
         if let Some(layout) = self.layout {
-            // SAFETY: allocated in `new` with this layout; `T: Copy` has
+            // SAFETY: allocated in `from_exact_iter` with this layout; `T: Copy` has
             // no destructor to run.
             unsafe { dealloc(self.ptr.as_ptr().cast(), layout) };
         }
