@@ -99,9 +99,9 @@ impl Analytic {
 const LEAF: u32 = 0x8000_0000;
 /// Child slot marker: no child (its box is empty and never hit).
 const EMPTY: u32 = u32::MAX;
-/// The most primitives of a leaf (two packets; the collapse decides
+/// The most primitives of a leaf (three packets; the collapse decides
 /// which subtrees become leaves).
-const MAX_LEAF: u32 = 8;
+const MAX_LEAF: u32 = 12;
 /// Traversal stack entries kept on the machine stack; a tree that needs
 /// more (see [`Accel::stack_size`]) gets a heap stack of its exact size,
 /// chosen once per ray.
@@ -529,12 +529,13 @@ struct Collapse<'a, const W: usize> {
 /// SAH cost, per unit of surface area, of visiting a wide node (its box
 /// test, ordering the hit children, the stack) and of testing one leaf
 /// packet. Measured on the 327k-triangle reference mesh against Embree's
-/// rays (`scripts/bench_rays.py`, docs/perf/traversal.md): a packet at 0.5
-/// of a node gives fuller nodes (13.8k nodes instead of 18.9k at 1.0) and
-/// the fastest traversal of 0.2–1.0; a packet costing as much as a node
-/// makes the collapse split leaves into more slots.
+/// rays (`scripts/bench_rays.py`, `scripts/ab_bench.py`,
+/// docs/perf/traversal.md): a packet at 0.2 of a node with leaves of up
+/// to three packets gives 8.5k nodes and 99.5k packets (13.8k and 110k at
+/// 0.5 with two) and traverses 4–5 % faster; a packet costing as much as
+/// a node makes the collapse split leaves into more slots.
 const NODE_COST: f32 = 1.0;
-const PACKET_COST: f32 = 0.5;
+const PACKET_COST: f32 = 0.2;
 /// SAH cost of testing one analytic primitive of a leaf: a call, a square
 /// root and a division (a sphere) for one primitive, where a packet tests
 /// four triangles at once. Costed as a node, so that the collapse gives
