@@ -15,7 +15,7 @@
 //! Embree's BVH8).
 //!
 //! The tree is built as a binary BVH by PLOC with reinsertion (the `obvhs`
-//! crate), then collapsed to wide nodes and leaves of at most two packets
+//! crate), then collapsed to wide nodes and leaves of at most three packets
 //! by the surface-area-optimal collapse of Ylitie et al. 2017 (a dynamic
 //! program over the binary tree, [`Collapse`]), and laid out so that a
 //! node's child nodes sit side by side. Triangles are two-sided (no
