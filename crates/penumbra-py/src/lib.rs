@@ -407,6 +407,44 @@ impl<'a> RayArrays<'a> {
         self.o.shape[0]
     }
 
+    /// Calls `f(k, ray)` for rays `first + k`, `k < n` (within `len()`).
+    /// Packed float32 origins and directions (what users pass) are read
+    /// ray by ray as they are traced; other arrays are converted a task at
+    /// a time into `buf` first.
+    fn for_each(&self, first: usize, n: usize, buf: &mut Vec<Ray>, mut f: impl FnMut(usize, &Ray)) {
+        let tmax = match self.tmax.as_ref().map(|t| &t.data) {
+            None => None,
+            Some(Data::Packed32(t)) => Some(&t[first..first + n]),
+            Some(_) => return self.for_each_converted(first, n, buf, f),
+        };
+        let (Data::Packed32(o), Data::Packed32(d)) = (&self.o.data, &self.d.data) else {
+            return self.for_each_converted(first, n, buf, f);
+        };
+        let rows = |s: &'a [f32]| s[3 * first..3 * (first + n)].chunks_exact(3);
+        for (k, (o, d)) in rows(o).zip(rows(d)).enumerate() {
+            let ray = Ray {
+                o: Vec3::new(o[0], o[1], o[2]),
+                d: Vec3::new(d[0], d[1], d[2]),
+                tmin: 0.0,
+                tmax: tmax.map_or(f32::INFINITY, |t| t[k]),
+            };
+            f(k, &ray);
+        }
+    }
+
+    fn for_each_converted(
+        &self,
+        first: usize,
+        n: usize,
+        buf: &mut Vec<Ray>,
+        mut f: impl FnMut(usize, &Ray),
+    ) {
+        self.read(first, n, buf);
+        for (k, ray) in buf.iter().enumerate() {
+            f(k, ray);
+        }
+    }
+
     /// Rays `first..first + n` (within `len()`) into `out`.
     fn read(&self, first: usize, n: usize, out: &mut Vec<Ray>) {
         let ray = Ray {
@@ -544,15 +582,14 @@ impl PyScene {
                 .enumerate()
                 .with_max_len(1)
                 .for_each_init(Vec::new, |buf, (task, (((t, shape), prim), uv))| {
-                    rays.read(task * RAYS_PER_TASK, t.len(), buf);
-                    for (k, (t, ray)) in t.iter_mut().zip(buf.iter()).enumerate() {
+                    rays.for_each(task * RAYS_PER_TASK, t.len(), buf, |k, ray| {
                         let h = scene.intersect(ray);
                         let (s, p, u) = h.map_or((-1, -1, Vec2::ZERO), |h| {
                             (h.shape as i32, h.prim as i32, h.uv)
                         });
-                        *t = h.map_or(f32::INFINITY, |h| h.t);
+                        t[k] = h.map_or(f32::INFINITY, |h| h.t);
                         (shape[k], prim[k], uv[2 * k], uv[2 * k + 1]) = (s, p, u.x, u.y);
-                    }
+                    })
                 })
         });
         let out = PyDict::new(py);
@@ -586,10 +623,9 @@ impl PyScene {
                 .enumerate()
                 .with_max_len(1)
                 .for_each_init(Vec::new, |buf, (task, hit)| {
-                    rays.read(task * RAYS_PER_TASK, hit.len(), buf);
-                    for (h, ray) in hit.iter_mut().zip(buf.iter()) {
-                        *h = scene.occluded(ray);
-                    }
+                    rays.for_each(task * RAYS_PER_TASK, hit.len(), buf, |k, ray| {
+                        hit[k] = scene.occluded(ray);
+                    })
                 })
         });
         Ok(PyArray1::from_vec(py, hit))
