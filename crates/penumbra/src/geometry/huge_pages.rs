@@ -24,6 +24,7 @@ use std::ptr::NonNull;
 
 /// Arrays smaller than this stay on ordinary pages (an advised range only
 /// gets huge pages for the 2 MiB-aligned blocks it covers).
+#[cfg_attr(not(target_os = "linux"), allow(dead_code))]
 const HUGE_PAGE: usize = 2 << 20;
 
 /// A fixed-length array of `T`, written once when it is made and then read.
