@@ -10,7 +10,11 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
                        32 spp; Mitsuba's prbvolpath), with --jobs
      each as `penumbra grad ... --reps N` (primal render + gradient pass,
      first call and warm median) and Mitsuba llvm_ad_rgb (first call with JIT,
-     warm median).
+     warm median), and Mitsuba's first call once more with an empty kernel
+     cache (HOME pointed at a fresh folder, so Dr.Jit finds no ~/.drjit):
+     the first run of a job on a machine. The other run uses the cache as
+     it is, so once a job has run on this machine its first call compiles
+     nothing (the table gives the cache's files at its start).
   2. Peak RSS of `penumbra grad` (reverse, cbox 128², 64 spp; or the
      density grid of volume_hetero, 32 spp, with --memory volume_hetero) for
      max_depth 2..64: the local tape holds one path at a time, so memory
@@ -23,8 +27,10 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -86,22 +92,35 @@ def main():
     }
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
-    print('| job (128²) | Penumbra first s | Penumbra warm s | Mitsuba prb first s '
-          '| Mitsuba prb warm s | Mitsuba warm / Penumbra warm | Mitsuba first / Penumbra first |')
-    print('|---|---|---|---|---|---|---|')
+    print('| job (128²) | Penumbra first s | Penumbra warm s | Mitsuba prb first s, empty cache '
+          '| Mitsuba prb first s (cache files) | Mitsuba prb warm s '
+          '| Mitsuba warm / Penumbra warm | Mitsuba first, empty cache / Penumbra first '
+          '| Mitsuba first / Penumbra first |')
+    print('|---|---|---|---|---|---|---|---|---|')
     for name in a.jobs:
         args = jobs[name]
         ours = penumbra(args)
         if a.no_mitsuba:
-            mi = {'first_s': float('nan'), 'warm_median_s': float('nan')}
+            mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
+                  'drjit_cache_files_at_start': '-'}
+            cold = {'first_s': float('nan')}
         else:
-            out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
-                                  '--spp', spp.get(name, '64'), '--reps', r],
-                                 capture_output=True, text=True, env=env)
-            mi = last_json(out.stdout, 'RESULT ')
+            def mitsuba(reps, run_env):
+                out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
+                                      '--spp', spp.get(name, '64'), '--reps', reps],
+                                     capture_output=True, text=True, env=run_env)
+                return last_json(out.stdout, 'RESULT ')
+            mi = mitsuba(r, env)
+            cold_home = tempfile.mkdtemp(prefix='drjit-cold-')
+            try:
+                cold = mitsuba('1', dict(env, HOME=cold_home))
+            finally:
+                shutil.rmtree(cold_home, ignore_errors=True)
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
-              f'| {mi["first_s"]:.3f} | {mi["warm_median_s"]:.3f} '
+              f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
+              f'| {mi["warm_median_s"]:.3f} '
               f'| {mi["warm_median_s"] / ours["warm_median_s"]:.2f} '
+              f'| {cold["first_s"] / ours["first_s"]:.2f} '
               f'| {mi["first_s"] / ours["first_s"]:.2f} |', flush=True)
     memory = {
         'cbox': ('cbox 128², 64 spp', ['scenes/cbox.xml', '--param', 'red.reflectance.value',

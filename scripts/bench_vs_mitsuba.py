@@ -6,6 +6,12 @@ For each scene (256², 64 spp by default) it runs, each in its own process:
   - `penumbra bench` (first render and warm median, peak RSS),
   - Mitsuba 3 llvm_ad_rgb (first call = JIT compile + render, warm median)
     and scalar_rgb, through scripts/mitsuba/bench.py,
+  - Mitsuba llvm_ad_rgb's first call once more with an empty kernel cache
+    (HOME pointed at a fresh folder, so Dr.Jit finds no ~/.drjit): the
+    first run of a scene on a machine. The other run uses the cache as it
+    is, so its first call compiles nothing once the scene has been
+    rendered before on this machine (the table gives the cache's files at
+    its start),
 and prints a Markdown table with the ratios Mitsuba / Penumbra (> 1: we are
 faster).
 
@@ -22,8 +28,10 @@ the per-sample work (camera ray, first hit, film).
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -67,21 +75,35 @@ def main():
             llvm = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
                              'llvm_ad_rgb', '--spp', str(a.spp), '--reps', str(a.reps), *their_depth],
                             env, 'RESULT ')
+            cold_home = tempfile.mkdtemp(prefix='drjit-cold-')
+            try:
+                cold = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
+                                 'llvm_ad_rgb', '--spp', str(a.spp), '--reps', '1', *their_depth],
+                                dict(env, HOME=cold_home), 'RESULT ')
+            finally:
+                shutil.rmtree(cold_home, ignore_errors=True)
+            llvm['first_cold_s'] = cold['first_s']
             scalar = None if a.no_scalar else run_json(
                 [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
                  '--spp', str(a.spp), '--reps', '1', *their_depth], env, 'RESULT ')
             rows.append((name, ours, llvm, scalar))
             print(f'{name}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} '
+                  f'(cache files at start: {llvm["drjit_cache_files_at_start"]}), '
+                  f'first with an empty cache {llvm["first_cold_s"]:.3f}, '
                   f'warm {llvm["warm_median_s"]:.3f}', file=sys.stderr, flush=True)
     print(f'\n| scene ({a.spp} spp, 256²) | Penumbra first s | Penumbra warm s | Penumbra peak MB '
-          '| Mitsuba llvm first s | Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
-          '| llvm warm / Penumbra warm | llvm first / Penumbra first | scalar / Penumbra |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
+          '| Mitsuba llvm first s, empty cache | Mitsuba llvm first s (cache files) '
+          '| Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
+          '| llvm warm / Penumbra warm | llvm first, empty cache / Penumbra first '
+          '| llvm first / Penumbra first | scalar / Penumbra |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for s, o, l, sc in rows:
         sc_t = sc['warm_median_s'] if sc else float('nan')
         print(f'| {s} | {o["first_s"]:.3f} | {o["warm_median_s"]:.3f} | {o["peak_rss_mb"]:.0f} '
-              f'| {l["first_s"]:.3f} | {l["warm_median_s"]:.3f} | {l["peak_rss_mb_inproc"]:.0f} '
+              f'| {l["first_cold_s"]:.3f} | {l["first_s"]:.3f} ({l["drjit_cache_files_at_start"]}) '
+              f'| {l["warm_median_s"]:.3f} | {l["peak_rss_mb_inproc"]:.0f} '
               f'| {sc_t:.3f} | {l["warm_median_s"] / o["warm_median_s"]:.2f} '
+              f'| {l["first_cold_s"] / o["first_s"]:.2f} '
               f'| {l["first_s"] / o["first_s"]:.2f} | {sc_t / o["warm_median_s"]:.2f} |')
 
 
