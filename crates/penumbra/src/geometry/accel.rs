@@ -1177,6 +1177,7 @@ impl Accel {
     /// occlusion rays, which often stop before popping what they pushed
     /// (−2.5 %, 7 of 12 rounds: no clear gain).
     #[inline(always)]
+    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
     fn prefetch<const W: usize>(&self, nodes: &[Node<W>], child: u32) {
         #[cfg(target_arch = "x86_64")]
         {
