@@ -27,7 +27,6 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -111,11 +110,8 @@ def main():
                                      capture_output=True, text=True, env=run_env)
                 return last_json(out.stdout, 'RESULT ')
             mi = mitsuba(r, env)
-            cold_home = tempfile.mkdtemp(prefix='drjit-cold-')
-            try:
+            with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
                 cold = mitsuba('1', dict(env, HOME=cold_home))
-            finally:
-                shutil.rmtree(cold_home, ignore_errors=True)
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
               f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
               f'| {mi["warm_median_s"]:.3f} '

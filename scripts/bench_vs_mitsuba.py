@@ -28,7 +28,6 @@ the per-sample work (camera ray, first hit, film).
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -72,16 +71,13 @@ def main():
             name = s if depth is None else f'{s}, max_depth {depth}'
             ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
                              '--reps', str(a.reps), *ours_depth])
-            llvm = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
-                             'llvm_ad_rgb', '--spp', str(a.spp), '--reps', str(a.reps), *their_depth],
-                            env, 'RESULT ')
-            cold_home = tempfile.mkdtemp(prefix='drjit-cold-')
-            try:
-                cold = run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
-                                 'llvm_ad_rgb', '--spp', str(a.spp), '--reps', '1', *their_depth],
-                                dict(env, HOME=cold_home), 'RESULT ')
-            finally:
-                shutil.rmtree(cold_home, ignore_errors=True)
+            def llvm_fwd(reps, run_env):
+                return run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
+                                 'llvm_ad_rgb', '--spp', str(a.spp), '--reps', str(reps),
+                                 *their_depth], run_env, 'RESULT ')
+            llvm = llvm_fwd(a.reps, env)
+            with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
+                cold = llvm_fwd(1, dict(env, HOME=cold_home))
             llvm['first_cold_s'] = cold['first_s']
             scalar = None if a.no_scalar else run_json(
                 [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
