@@ -9,7 +9,7 @@
 //! reports every scene that fails. `PENUMBRA_CONFORMANCE=name,name` runs
 //! only those scenes (while working on a feature).
 
-mod reference_check;
+use crate::reference_check;
 
 use std::path::PathBuf;
 

@@ -3,7 +3,7 @@
 //! the mesh without them; a NaN vertex position stays an error that names
 //! the file and the vertex.
 
-mod common;
+use crate::common;
 
 use penumbra::geometry::{Shape, SkippedFaces};
 use penumbra::integrator::{render, RenderOptions};

@@ -5,7 +5,7 @@
 //! a sampled point on it must be evaluated with its own triangle and
 //! barycentrics, as a point hit by a ray is.
 
-mod common;
+use crate::common;
 
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;

@@ -8,7 +8,7 @@
 //! checks the free-flight weights, delta tracking's null collisions, the
 //! phase functions and the transmittance of shadow rays.
 
-mod common;
+use crate::common;
 
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;

@@ -30,7 +30,7 @@
 //! derivative: for a random tangent v and a random adjoint image δI,
 //! ⟨δI, dI/dθ·v⟩ = ⟨∂L/∂θ, v⟩ with the same samples, up to f32 rounding.
 
-mod common;
+use crate::common;
 
 use common::sensor_xml;
 use penumbra::diff::{check_gradient, render_backward, render_forward, CheckOptions};

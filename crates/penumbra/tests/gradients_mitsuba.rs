@@ -15,8 +15,8 @@ use penumbra::optim::Loss;
 use penumbra::scene::Scene;
 use std::path::PathBuf;
 
-mod common;
-mod volume_scenes;
+use crate::common;
+use crate::volume_scenes;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")

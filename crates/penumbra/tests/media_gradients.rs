@@ -17,7 +17,7 @@ use penumbra::diff::{render_backward, render_forward};
 use penumbra::integrator::{render, RenderOptions};
 use penumbra::scene::Scene;
 
-mod volume_scenes;
+use crate::volume_scenes;
 
 const BATCHES: u64 = 8;
 

@@ -8,7 +8,7 @@
 //! estimation, Le · f · cos / pdf = 3e38 · (1/π) · cos · 4π, which
 //! overflows f32 for cos > 0.28.
 
-mod common;
+use crate::common;
 
 use penumbra::diff::{render_backward, render_forward};
 use penumbra::integrator::{render, RenderOptions};

@@ -3,8 +3,8 @@
 //! the variance of our own estimator rather than tuned by hand.
 //!
 
-mod reference_check;
-mod volume_scenes;
+use crate::reference_check;
+use crate::volume_scenes;
 
 use std::path::PathBuf;
 

@@ -32,7 +32,7 @@
 //!
 //! The box filter makes each pixel the plain integral over its square.
 
-mod common;
+use crate::common;
 
 use penumbra::diff::{render_backward, render_forward, translation_tangent};
 use penumbra::integrator::{render, RenderOptions};

@@ -1,5 +1,5 @@
 //! Helpers shared by the integration tests: small scenes written inline,
-//! batch statistics. Each test binary uses a part of them.
+//! batch statistics. Each test file uses a part of them.
 #![allow(dead_code)]
 
 /// A perspective sensor looking from `origin` at the world origin (+y up)
