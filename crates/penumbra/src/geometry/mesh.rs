@@ -129,6 +129,10 @@ pub struct Mesh {
     pub non_manifold_edges: usize,
     /// Triangle selection by area for [`ShapeT::sample_position`].
     area_distr: DiscreteDistribution,
+    /// Set when the mesh is two triangles of equal area sharing an edge
+    /// (a `rectangle`, a quad light read from a file): positions are then
+    /// sampled without the area distribution.
+    quad: Option<QuadSampling>,
     area: f32,
     /// Faces around each vertex, for the derivatives of vertex normals that
     /// follow the positions (empty without vertex normals).
@@ -364,6 +368,7 @@ impl Mesh {
             skipped,
             non_manifold_edges,
             area_distr: DiscreteDistribution::default(),
+            quad: None,
             area: 0.0,
             face_n: Vec::new(),
             face_area2: Vec::new(),
@@ -431,6 +436,7 @@ impl Mesh {
             ))
         })?;
         self.area = self.area_distr.sum() as f32;
+        self.quad = QuadSampling::new(&self.faces, &areas);
         if let Some(edges) = self.edges.get_mut() {
             let normals = self.normals.map(|id| store.data(id));
             edges.refresh(&self.faces, store.data(self.positions), normals);
@@ -790,8 +796,13 @@ impl ShapeT for Mesh {
     /// 1 / total area.
     #[inline]
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
-        let (f, _, ux) = self.area_distr.sample_reuse(u.x);
-        let b = warp::square_to_uniform_triangle(Vec2::new(ux, u.y));
+        let (f, b) = match &self.quad {
+            Some(quad) => quad.sample(u),
+            None => {
+                let (f, _, ux) = self.area_distr.sample_reuse(u.x);
+                (f, warp::square_to_uniform_triangle(Vec2::new(ux, u.y)))
+            }
+        };
         let [p0, p1, p2] = self.triangle(store, f);
         let b0 = 1.0 - b.x - b.y;
         let p = p0 * b0 + p1 * b.x + p2 * b.y;
@@ -816,6 +827,75 @@ impl ShapeT for Mesh {
 
     fn surface_area(&self) -> f32 {
         self.area
+    }
+}
+
+/// Uniform position sampling of a mesh of two triangles of equal area
+/// that share an edge (and any number of faces of zero area, which are
+/// never sampled): the unit square's half u + v ≤ 1 maps affinely onto the
+/// first triangle and the half u + v > 1 onto the second. An affine map has
+/// a constant Jacobian, so each half lands uniformly on its triangle, and
+/// each triangle, holding half of the area, is reached with probability ½:
+/// the density is 1 / area, as with the area distribution and a triangle
+/// warp, for one comparison instead of the distribution's search and the
+/// warp. The square's corner (0, 0) is the first triangle's own vertex,
+/// (1, 1) the second's, (1, 0) and (0, 1) the two shared ones.
+#[derive(Clone, Copy, Debug)]
+struct QuadSampling {
+    /// The two faces.
+    faces: [usize; 2],
+    /// Per face: the positions, in the face's index list, of its own
+    /// vertex and of the shared vertices s0 and s1 (in that order).
+    slots: [[usize; 3]; 2],
+}
+
+impl QuadSampling {
+    /// `Some` when exactly two faces have an area, they share two vertices
+    /// and their areas agree to 1e-6 (relative): a parallelogram, up to the
+    /// rounding of its corners (1e-7), so that the density differs from
+    /// 1 / area by less than the f32 pdf's own rounding.
+    fn new(faces: &[[u32; 3]], areas: &[f32]) -> Option<QuadSampling> {
+        let mut with_area = (0..faces.len()).filter(|&f| areas[f] > 0.0);
+        let (Some(i0), Some(i1), None) = (with_area.next(), with_area.next(), with_area.next())
+        else {
+            return None;
+        };
+        let ([f0, f1], [a0, a1]) = ([faces[i0], faces[i1]], [areas[i0], areas[i1]]);
+        if (a0 - a1).abs() > 1e-6 * (a0 + a1) {
+            return None;
+        }
+        let shared: Vec<u32> = f0.iter().copied().filter(|v| f1.contains(v)).collect();
+        let &[s0, s1] = shared.as_slice() else {
+            return None;
+        };
+        let slots = |f: [u32; 3]| {
+            let at = |v: u32| f.iter().position(|&w| w == v);
+            let own = f.iter().position(|&w| w != s0 && w != s1)?;
+            Some([own, at(s0)?, at(s1)?])
+        };
+        Some(QuadSampling {
+            faces: [i0, i1],
+            slots: [slots(f0)?, slots(f1)?],
+        })
+    }
+
+    /// The face and the barycentrics (of its second and third vertex) of
+    /// the point `u` maps to.
+    #[inline]
+    fn sample(&self, u: Vec2) -> (usize, Vec2) {
+        // weights of (own vertex, s0, s1); the own vertex's from the same
+        // rounded sum as the test, so that it is never negative
+        let sum = u.x + u.y;
+        let (f, w) = if sum <= 1.0 {
+            (0, [1.0 - sum, u.x, u.y])
+        } else {
+            (1, [sum - 1.0, 1.0 - u.y, 1.0 - u.x])
+        };
+        let mut b = [0.0; 3];
+        for (slot, w) in self.slots[f].into_iter().zip(w) {
+            b[slot] = w;
+        }
+        (self.faces[f], Vec2::new(b[1], b[2]))
     }
 }
 
@@ -1333,6 +1413,68 @@ mod tests {
         assert!((sf.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.sh_frame.n.val() - Vec3::Z).length() < 1e-6);
         assert!((sf.wi.z - 1.0).abs() < 1e-5);
+    }
+
+    /// A quad (two triangles of equal area sharing an edge, here a skewed
+    /// parallelogram whose faces list their vertices in different orders)
+    /// is sampled by the affine map of the unit square onto it: every point
+    /// is `q0 + u (s0 − q0) + v (s1 − q0)`, on the face the sample reports
+    /// at the barycentrics it reports, with density 1 / area; faces of zero
+    /// area beside it change nothing. A mesh of two triangles of different
+    /// areas keeps the area distribution.
+    #[test]
+    fn a_quad_is_sampled_by_the_affine_map_of_the_square() {
+        let (q0, s0, s1) = (
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.5),
+            Vec3::new(0.5, 1.0, 0.0),
+        );
+        // vertices s1, q0, q1, s0; faces (s0, s1, q0) and (q1, s1, s0)
+        let d = MeshData {
+            positions: vec![s1, q0, s0 + s1 - q0, s0],
+            faces: vec![[3, 0, 1], [2, 0, 3]],
+            ..Default::default()
+        };
+        let (m, store) = build(d).unwrap();
+        assert!(m.quad.is_some());
+        for i in 0..17 {
+            for j in 0..17 {
+                let u = Vec2::new(i as f32 / 16.0, j as f32 / 16.0) * 0.999 + 0.0005;
+                let s = m.sample_position(&store, u);
+                let expected = q0 + u.x * (s0 - q0) + u.y * (s1 - q0);
+                assert!(
+                    (s.p - expected).length() < 1e-5,
+                    "u {u}: {} vs {expected}",
+                    s.p
+                );
+                let [p0, p1, p2] = m.triangle(&store, s.prim as usize);
+                let b = s.local;
+                assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6, "{b}");
+                let on_face = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+                assert!((on_face - s.p).length() < 1e-6);
+                assert!((s.pdf * m.surface_area() - 1.0).abs() < 1e-6);
+            }
+        }
+        // a flat face beside the quad (vertex 4 on the line through 1 and
+        // 3) is never sampled and does not change the sampling
+        let with_flat = MeshData {
+            positions: vec![s1, q0, s0 + s1 - q0, s0, q0 + 2.0 * (s0 - q0)],
+            faces: vec![[1, 3, 4], [3, 0, 1], [2, 0, 3]],
+            ..Default::default()
+        };
+        let (flat, flat_store) = build(with_flat).unwrap();
+        let u = Vec2::new(0.3, 0.6);
+        let (a, b) = (
+            flat.sample_position(&flat_store, u),
+            m.sample_position(&store, u),
+        );
+        assert!(flat.quad.is_some() && a.prim == b.prim + 1 && a.p == b.p);
+        let uneven = MeshData {
+            positions: vec![q0, s0, s1, 2.0 * (s0 + s1)],
+            faces: vec![[0, 1, 2], [1, 3, 2]],
+            ..Default::default()
+        };
+        assert!(build(uneven).unwrap().0.quad.is_none());
     }
 
     /// Area sampling is uniform: χ²-test of sample counts per triangle
