@@ -391,9 +391,9 @@ impl Mesh {
     /// World-space vertex `i` (f32).
     #[inline(always)]
     pub fn vertex(&self, store: &ParamStore, i: u32) -> Vec3 {
-        let d = store.data(self.positions);
         let i = 3 * i as usize;
-        Vec3::new(d[i], d[i + 1], d[i + 2])
+        // one bounds check for the three coordinates
+        Vec3::from_slice(&store.data(self.positions)[i..i + 3])
     }
 
     /// The three world-space vertices of triangle `f` (f32).
@@ -810,7 +810,7 @@ impl ShapeT for Mesh {
             Some(tid) => {
                 let t = store.data(tid);
                 let [i0, i1, i2] = self.faces[f];
-                let tc = |i: u32| Vec2::new(t[2 * i as usize], t[2 * i as usize + 1]);
+                let tc = |i: u32| Vec2::from_slice(&t[2 * i as usize..2 * i as usize + 2]);
                 tc(i0) * b0 + tc(i1) * b.x + tc(i2) * b.y
             }
             None => b,
