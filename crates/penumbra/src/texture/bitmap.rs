@@ -60,10 +60,11 @@ impl WrapMode {
 /// `<key>.to_uv`) and applies it to `uv`.
 #[inline]
 pub(crate) fn apply_to_uv<R: Real>(store: &ParamView, id: ParamId, uv: V2<R>) -> V2<R> {
-    let m = |i| store.value(id, i);
+    // one look-up of the parameter and one bounds check for its two rows
+    let m = &store.data(id)[..6];
     V2::new(
-        uv.x * m(0) + uv.y * m(1) + m(2),
-        uv.x * m(3) + uv.y * m(4) + m(5),
+        uv.x * m[0] + uv.y * m[1] + m[2],
+        uv.x * m[3] + uv.y * m[4] + m[5],
     )
 }
 
@@ -303,9 +304,17 @@ impl Bitmap {
                 let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
                 let terms = self.bilinear_terms(taps, fx, fy);
                 if self.channels == 3 {
-                    let channel =
-                        |c: usize| weighted_sum(data, &terms.map(|(i, w)| (3 * i + c, w)));
-                    Vec3::new(channel(0), channel(1), channel(2))
+                    // [`weighted_sum`] per channel, but a texel's three
+                    // channels read as one vector (one bounds check, not
+                    // three): the same terms in the same order, zero
+                    // weights skipped alike, so the same value
+                    let mut v = Vec3::ZERO;
+                    for (i, w) in terms {
+                        if w != 0.0 {
+                            v += Vec3::from_slice(&data[3 * i..3 * i + 3]) * w;
+                        }
+                    }
+                    v
                 } else {
                     Vec3::splat(weighted_sum(data, &terms))
                 }
