@@ -793,7 +793,7 @@ impl ShapeT for Mesh {
     }
 
     /// Picks a triangle by area, then a uniform point in it (a quad: see
-    /// [`QuadSampling`]); the density is 1 / total area.
+    /// `QuadSampling`); the density is 1 / total area.
     #[inline]
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
         let (f, b) = match &self.quad {
