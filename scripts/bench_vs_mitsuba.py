@@ -71,17 +71,15 @@ def main():
             name = s if depth is None else f'{s}, max_depth {depth}'
             ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
                              '--reps', str(a.reps), *ours_depth])
-            def llvm_fwd(reps, run_env):
+            def mitsuba_fwd(variant, reps, run_env):
                 return run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
-                                 'llvm_ad_rgb', '--spp', str(a.spp), '--reps', str(reps),
+                                 variant, '--spp', str(a.spp), '--reps', str(reps),
                                  *their_depth], run_env, 'RESULT ')
-            llvm = llvm_fwd(a.reps, env)
+            llvm = mitsuba_fwd('llvm_ad_rgb', a.reps, env)
             with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
-                cold = llvm_fwd(1, dict(env, HOME=cold_home))
+                cold = mitsuba_fwd('llvm_ad_rgb', 1, dict(env, HOME=cold_home))
             llvm['first_cold_s'] = cold['first_s']
-            scalar = None if a.no_scalar else run_json(
-                [a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant', 'scalar_rgb',
-                 '--spp', str(a.spp), '--reps', '1', *their_depth], env, 'RESULT ')
+            scalar = None if a.no_scalar else mitsuba_fwd('scalar_rgb', 1, env)
             rows.append((name, ours, llvm, scalar))
             print(f'{name}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} '
                   f'(cache files at start: {llvm["drjit_cache_files_at_start"]}), '

@@ -2,7 +2,7 @@
 //! surface uv with bilinear or nearest filtering.
 
 use super::TextureT;
-use crate::ad::{weighted_sum, Real};
+use crate::ad::Real;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
@@ -286,8 +286,8 @@ impl Bitmap {
     /// directly (the same arithmetic as a lookup whose uv does not move).
     fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
         let (w, h) = (self.width, self.height);
-        let texel = |x: usize, y: usize| {
-            let i = y * w + x;
+        // texel i (row-major), its channels read as one vector
+        let texel = |i: usize| {
             if self.channels == 3 {
                 Vec3::from_slice(&data[3 * i..3 * i + 3])
             } else {
@@ -298,26 +298,20 @@ impl Bitmap {
             FilterType::Nearest => {
                 let x = floor_i64(uv.x * w as f32);
                 let y = floor_i64(uv.y * h as f32);
-                texel(self.wrap.wrap(x, w), self.wrap.wrap(y, h))
+                texel(self.wrap.wrap(y, h) * w + self.wrap.wrap(x, w))
             }
             FilterType::Bilinear => {
                 let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
-                let terms = self.bilinear_terms(taps, fx, fy);
-                if self.channels == 3 {
-                    // [`weighted_sum`] per channel, but a texel's three
-                    // channels read as one vector (one bounds check, not
-                    // three): the same terms in the same order, zero
-                    // weights skipped alike, so the same value
-                    let mut v = Vec3::ZERO;
-                    for (i, w) in terms {
-                        if w != 0.0 {
-                            v += Vec3::from_slice(&data[3 * i..3 * i + 3]) * w;
-                        }
+                // [`crate::ad::weighted_sum`] per channel, texel by texel: the same
+                // terms in the same order, zero weights skipped alike, so
+                // the same value as a lookup with derivatives
+                let mut v = Vec3::ZERO;
+                for (i, w) in self.bilinear_terms(taps, fx, fy) {
+                    if w != 0.0 {
+                        v += texel(i) * w;
                     }
-                    v
-                } else {
-                    Vec3::splat(weighted_sum(data, &terms))
                 }
+                v
             }
         }
     }
