@@ -9,11 +9,13 @@ the minimum, the change of the median, and in how many rounds B was
 faster than A with a two-sided sign test (the chance of at least that
 lopsided a count if A and B were the same).
 
-A run's time is, from its standard output:
-  - a line `RESULT {json}` with a list `times` (crates/penumbra/examples/
-    trace_rays.rs, scripts/embree_bench/bench.c): their median;
-  - else the last JSON line with `warm_median_s` (`penumbra bench`,
-    `penumbra grad --reps N`).
+A run's time is, from the last JSON line of its standard output (bare or
+after `RESULT `) that has it:
+  - the key given by --key (e.g. `--key load_s`: the scene loading time of
+    `penumbra bench` and of scripts/mitsuba/bench.py);
+  - by default `warm_median_s` (`penumbra bench`, `penumbra grad --reps
+    N`), or the median of a list `times` (crates/penumbra/examples/
+    trace_rays.rs, scripts/embree_bench/bench.c).
 
   python3 scripts/ab_bench.py --rounds 10 \\
       --a "/tmp/penumbra_before bench scenes/cbox.xml --spp 16 -q" \\
@@ -30,19 +32,19 @@ import subprocess
 import sys
 
 
-def run_time(cmd):
+def run_time(cmd, key):
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode:
         raise SystemExit(f"ab_bench.py: {shlex.join(cmd)} failed:\n{out.stderr}")
-    lines = out.stdout.splitlines()
-    for line in reversed(lines):
-        if line.startswith("RESULT {"):
-            return statistics.median(json.loads(line[len("RESULT "):])["times"])
-    for line in reversed(lines):
-        if line.startswith("{"):
-            d = json.loads(line)
-            if "warm_median_s" in d:
-                return d["warm_median_s"]
+    for line in reversed(out.stdout.splitlines()):
+        text = line[len("RESULT "):] if line.startswith("RESULT {") else line
+        if not text.startswith("{"):
+            continue
+        d = json.loads(text)
+        if key in d:
+            return d[key]
+        if key == "warm_median_s" and "times" in d:
+            return statistics.median(d["times"])
     raise SystemExit(f"ab_bench.py: no time in the output of {shlex.join(cmd)}:\n{out.stdout}")
 
 
@@ -60,12 +62,14 @@ def main():
     ap.add_argument("--a", required=True, help="command A (one string, split as a shell would)")
     ap.add_argument("--b", required=True, help="command B")
     ap.add_argument("--rounds", type=int, default=10)
+    ap.add_argument("--key", default="warm_median_s",
+                    help="the JSON key holding the time (default: warm_median_s)")
     a = ap.parse_args()
     cmds = {"A": shlex.split(a.a), "B": shlex.split(a.b)}
     times = {"A": [], "B": []}
     for r in range(a.rounds):
         for side in ("A", "B") if r % 2 == 0 else ("B", "A"):
-            times[side].append(run_time(cmds[side]))
+            times[side].append(run_time(cmds[side], a.key))
         print(f"round {r + 1}: A {times['A'][-1]:.4f}  B {times['B'][-1]:.4f}", flush=True)
     med = {s: statistics.median(t) for s, t in times.items()}
     for s in ("A", "B"):

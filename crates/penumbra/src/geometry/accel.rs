@@ -46,6 +46,7 @@ use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::Bvh2;
 use obvhs::ploc::PlocBuilder;
 use obvhs::BvhBuildParams;
+use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
 #[derive(Clone, Copy, Debug)]
@@ -510,6 +511,7 @@ struct Collapse<'a, const W: usize> {
     /// Per primitive (build-order index): whether it is analytic (tested
     /// on its own, not in a packet's SIMD lanes).
     analytic: &'a [bool],
+    any_analytic: bool,
     /// Primitives below each binary node, and how many are analytic.
     count: Vec<u32>,
     analytic_count: Vec<u32>,
@@ -556,6 +558,7 @@ impl<const W: usize> Collapse<'_, W> {
         let mut c = Collapse {
             bvh2,
             analytic,
+            any_analytic: analytic.contains(&true),
             count: vec![0; n],
             analytic_count: vec![0; n],
             cost: vec![[0.0; W]; n],
@@ -566,7 +569,12 @@ impl<const W: usize> Collapse<'_, W> {
             leaf_more: Vec::new(),
             depth: 0,
         };
-        c.plan(0);
+        // children after their parents (`Accel::build_over` orders the
+        // tree so): one sweep from the last node plans children first
+        debug_assert!(bvh2.children_are_ordered_after_parents || n < 2);
+        for i in (0..n).rev() {
+            c.plan(i);
+        }
         c
     }
 
@@ -593,8 +601,8 @@ impl<const W: usize> Collapse<'_, W> {
         (W - 1) * self.depth + 2
     }
 
-    /// Fills `count`, `cost`, `form` and `node_split` for the subtree of
-    /// binary node `i` (children first).
+    /// Fills `count`, `cost`, `form` and `node_split` of binary node `i`
+    /// from those of its children.
     fn plan(&mut self, i: usize) {
         let n = &self.bvh2.nodes[i];
         let area = n.aabb().half_area();
@@ -602,7 +610,13 @@ impl<const W: usize> Collapse<'_, W> {
             let count = n.prim_count;
             let first = n.first_index as usize;
             let ids = &self.bvh2.primitive_indices[first..first + count as usize];
-            let analytic = ids.iter().filter(|&&p| self.analytic[p as usize]).count() as u32;
+            // (read only where there are analytic primitives: the reads
+            // are scattered, one cache miss per primitive of a large mesh)
+            let analytic = if self.any_analytic {
+                ids.iter().filter(|&&p| self.analytic[p as usize]).count() as u32
+            } else {
+                0
+            };
             self.count[i] = count;
             self.analytic_count[i] = analytic;
             self.cost[i] = [leaf_cost(area, count, analytic); W];
@@ -610,8 +624,6 @@ impl<const W: usize> Collapse<'_, W> {
             return;
         }
         let (l, r) = (n.first_index as usize, n.first_index as usize + 1);
-        self.plan(l);
-        self.plan(r);
         let count = self.count[l] + self.count[r];
         let analytic = self.analytic_count[l] + self.analytic_count[r];
         self.count[i] = count;
@@ -862,6 +874,7 @@ impl Accel {
             p.search_depth_threshold,
         );
         ReinsertionOptimizer::default().run(&mut bvh2, p.reinsertion_batch_ratio, None);
+        bvh2.reorder_in_stack_traversal_order();
         a.bvh2 = bvh2;
         a.finish(shapes, store);
         a
@@ -983,7 +996,8 @@ impl Accel {
 
     fn aabbs(&self, shapes: &[Shape], store: &ParamStore) -> Vec<Aabb> {
         self.prims
-            .iter()
+            .par_iter()
+            .with_min_len(4096)
             .map(|&[s, p]| match shapes.get(s as usize) {
                 Some(Shape::Mesh(m)) => {
                     let [p0, p1, p2] = m.triangle(store, p as usize);
@@ -1024,7 +1038,11 @@ impl Accel {
             #[cfg(not(target_arch = "x86_64"))]
             Width::Eight => unreachable!("Width::detect gives Four off x86-64"),
         };
-        self.tris = HugePageArray::from_exact_iter(leaves.iter().zip(more).map(|(ids, more)| {
+        // the leaves' triangles are scattered over the meshes' arrays:
+        // packed on all cores, so that their cache misses overlap
+        let prims = &self.prims;
+        self.tris = HugePageArray::from_fn_par(leaves.len(), |i| {
+            let (ids, more) = (&leaves[i], more[i]);
             let mut lanes = [[Vec3::ZERO; 4]; 4];
             let mut analytic = 0u32;
             let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
@@ -1032,7 +1050,7 @@ impl Accel {
                 if id == u32::MAX {
                     continue;
                 }
-                let [s, p] = self.prims[id as usize];
+                let [s, p] = prims[id as usize];
                 (shape[k], prim[k]) = (s, p);
                 match shapes.get(s as usize) {
                     // a zero-area face keeps zero edges, like an
@@ -1067,7 +1085,7 @@ impl Accel {
                 analytic,
                 more,
             }
-        }));
+        });
     }
 
     /// Size and fill of the wide tree (for benchmarks beside other

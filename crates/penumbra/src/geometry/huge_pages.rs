@@ -19,6 +19,7 @@
 //! (THP `never`, another OS), the array is an ordinary one.
 
 use std::alloc::{alloc, dealloc, handle_alloc_error, Layout};
+use std::mem::MaybeUninit;
 use std::ops::Deref;
 use std::ptr::NonNull;
 
@@ -55,13 +56,47 @@ unsafe impl<T: Copy + Sync> Sync for HugePageArray<T> {}
 
 impl<T: Copy> HugePageArray<T> {
     pub(crate) fn new(items: &[T]) -> HugePageArray<T> {
-        HugePageArray::from_exact_iter(items.iter().copied())
+        let mut array = HugePageArray::with_storage(items.len());
+        // `len` counts the elements written (here all at once: copying
+        // cannot panic)
+        // SAFETY: the storage holds `items.len()` elements of `T`, and a
+        // fresh allocation does not overlap `items`.
+        unsafe {
+            std::ptr::copy_nonoverlapping(items.as_ptr(), array.ptr.as_ptr(), items.len());
+        }
+        array.len = items.len();
+        array
     }
 
-    /// The array of the items of `iter`, written straight into the
-    /// advised storage (no second copy of a large array alive at once).
-    pub(crate) fn from_exact_iter(iter: impl ExactSizeIterator<Item = T>) -> HugePageArray<T> {
-        let n = iter.len();
+    /// The array `[f(0), f(1), …, f(n - 1)]`, its elements computed in
+    /// parallel and written straight into the advised storage (no second
+    /// copy of a large array alive at once).
+    pub(crate) fn from_fn_par(n: usize, f: impl Fn(usize) -> T + Sync) -> HugePageArray<T>
+    where
+        T: Send,
+    {
+        use rayon::prelude::*;
+        let mut array = HugePageArray::<T>::with_storage(n);
+        // SAFETY: the storage holds `n` elements of `T`, not yet
+        // initialised, which `MaybeUninit` allows.
+        let slots = unsafe {
+            std::slice::from_raw_parts_mut(array.ptr.as_ptr().cast::<MaybeUninit<T>>(), n)
+        };
+        slots
+            .par_iter_mut()
+            .with_min_len(1024)
+            .enumerate()
+            .for_each(|(i, slot)| {
+                slot.write(f(i));
+            });
+        // only now that every element is written (if `f` panicked, the
+        // array is dropped with `len` 0 and frees its storage)
+        array.len = n;
+        array
+    }
+
+    /// An array of length 0 with storage for `n` elements.
+    fn with_storage(n: usize) -> HugePageArray<T> {
         let bytes = n * std::mem::size_of::<T>();
         let mut array = HugePageArray {
             ptr: NonNull::dangling(),
@@ -69,7 +104,6 @@ impl<T: Copy> HugePageArray<T> {
             storage: Storage::Nothing,
         };
         if bytes == 0 {
-            array.len = n;
             return array;
         }
         let (ptr, storage) = map_huge_pages(bytes).unwrap_or_else(|| {
@@ -81,19 +115,6 @@ impl<T: Copy> HugePageArray<T> {
             (ptr, Storage::Heap(layout))
         });
         (array.ptr, array.storage) = (ptr.cast::<T>(), storage);
-        // `len` counts the elements written, so that a panicking iterator
-        // leaves an array that frees its storage
-        for item in iter.take(n) {
-            // SAFETY: the storage holds `n` elements of `T` (its size is at
-            // least `bytes`, its alignment at least `T`'s: a mapping starts
-            // on a huge page) and `len < n`.
-            unsafe { array.ptr.as_ptr().add(array.len).write(item) };
-            array.len += 1;
-        }
-        assert_eq!(
-            array.len, n,
-            "the iterator yielded fewer items than it said"
-        );
         array
     }
 }
@@ -153,7 +174,7 @@ impl<T: Copy> Drop for HugePageArray<T> {
         // `T: Copy` has no destructor to run, only the storage to free
         match self.storage {
             Storage::Nothing => {}
-            // SAFETY: allocated in `from_exact_iter` with this layout.
+            // SAFETY: allocated in `with_storage` with this layout.
             Storage::Heap(layout) => unsafe { dealloc(ptr, layout) },
             // SAFETY: mapped by `map_huge_pages` with this length, and
             // not referenced once the array is gone.
@@ -209,6 +230,8 @@ mod tests {
             let a = HugePageArray::from(v.clone());
             assert_eq!(&*a, &v[..]);
             assert_eq!(&*a.clone(), &v[..]);
+            let b = HugePageArray::from_fn_par(n, |i| v[i]);
+            assert_eq!(&*b, &v[..]);
             if cfg!(target_os = "linux") && std::mem::size_of_val(&v[..]) >= HUGE_PAGE {
                 assert_eq!(a.as_ptr() as usize % HUGE_PAGE, 0);
             }

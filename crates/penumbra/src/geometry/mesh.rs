@@ -41,7 +41,6 @@ use crate::math::{warp, DiscreteDistribution, Frame, Transform, V2, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use glam::{Vec2, Vec3};
 use rdst::RadixSort;
-use rustc_hash::FxHashSet;
 use std::sync::OnceLock;
 
 /// Mesh data as read from a file (object space), before validation.
@@ -922,27 +921,46 @@ fn remove_degenerate_faces(
     positions: &[Vec3],
 ) -> (SkippedFaces, Vec<usize>) {
     let mut skipped = SkippedFaces::default();
-    let mut seen = FxHashSet::default();
-    seen.reserve(faces.len());
-    let mut keep = |&[a, b, c]: &[u32; 3]| {
-        if a == b || b == c || a == c {
+    let repeats_index = |&[a, b, c]: &[u32; 3]| a == b || b == c || a == c;
+    // a face repeats an earlier one where its sorted vertex indices equal
+    // those of a face with a lower index: sorted by (vertex set, face),
+    // each run of one vertex set starts with the face that stays (a radix
+    // sort: a mesh of millions of faces is checked at every load)
+    let mut keys: Vec<u128> = faces
+        .iter()
+        .enumerate()
+        .filter(|(_, face)| !repeats_index(face))
+        .map(|(f, face)| {
+            let mut v = *face;
+            v.sort_unstable();
+            (v[0] as u128) << 96 | (v[1] as u128) << 64 | (v[2] as u128) << 32 | f as u128
+        })
+        .collect();
+    keys.radix_sort_unstable();
+    let mut repeat = vec![false; faces.len()];
+    for run in keys.chunk_by(|a, b| a >> 32 == b >> 32) {
+        for &k in &run[1..] {
+            repeat[k as u32 as usize] = true;
+        }
+    }
+    let mut keep = |f: usize| {
+        if repeats_index(&faces[f]) {
             skipped.zero_area += 1;
             return false;
         }
-        let mut sorted = [a, b, c];
-        sorted.sort_unstable();
-        if !seen.insert(sorted) {
+        if repeat[f] {
             skipped.duplicate += 1;
             return false;
         }
         let p = |i: u32| positions[i as usize];
+        let [a, b, c] = faces[f];
         if is_degenerate(p(a), p(b), p(c)) {
             skipped.zero_area += 1;
         }
         true
     };
     // the indices of the kept faces, to filter the face attributes alike
-    let kept: Vec<usize> = (0..faces.len()).filter(|&f| keep(&faces[f])).collect();
+    let kept: Vec<usize> = (0..faces.len()).filter(|&f| keep(f)).collect();
     *faces = kept.iter().map(|&f| faces[f]).collect();
     (skipped, kept)
 }
