@@ -151,6 +151,11 @@ impl<const W: usize> Node<W> {
     /// Puts `child`, with box `bb`, in slot `slot`.
     fn set(&mut self, slot: usize, child: u32, bb: &Aabb) {
         self.child[slot] = child;
+        self.set_box(slot, bb);
+    }
+
+    /// Gives the child in slot `slot` the box `bb`.
+    fn set_box(&mut self, slot: usize, bb: &Aabb) {
         for a in 0..3 {
             self.b[0][a][slot] = bb.min[a];
             self.b[1][a][slot] = bb.max[a];
@@ -268,6 +273,59 @@ struct Tri4 {
     analytic: u32,
     /// Another packet of the same leaf follows this one.
     more: bool,
+}
+
+impl Tri4 {
+    /// The packet of the primitives `(shape[k], prim[k])` of its lanes
+    /// (`u32::MAX`: an unused lane) at the current vertex positions.
+    fn pack(
+        shape: [u32; 4],
+        prim: [u32; 4],
+        more: bool,
+        shapes: &[Shape],
+        store: &ParamStore,
+    ) -> Tri4 {
+        let mut lanes = [[Vec3::ZERO; 4]; 4];
+        let mut analytic = 0u32;
+        for k in 0..4 {
+            let (s, p) = (shape[k], prim[k] as usize);
+            if s == u32::MAX {
+                continue;
+            }
+            match shapes.get(s as usize) {
+                // a zero-area face keeps zero edges, like an
+                // unused lane: never hit (see geometry::mesh)
+                Some(Shape::Mesh(m)) if m.face_is_degenerate(p) => {}
+                Some(Shape::Mesh(m)) => {
+                    let [p0, p1, p2] = m.triangle(store, p);
+                    let (e1, e2) = (p0 - p1, p2 - p0);
+                    lanes[k] = [p0, e1, e2, e1.cross(e2)];
+                }
+                _ => analytic |= 1 << k,
+            }
+        }
+        let soa = |f: usize| {
+            let axis = |a: usize| {
+                Vec4::new(
+                    lanes[0][f][a],
+                    lanes[1][f][a],
+                    lanes[2][f][a],
+                    lanes[3][f][a],
+                )
+            };
+            [axis(0), axis(1), axis(2)]
+        };
+        Tri4 {
+            v0: soa(0),
+            e1: soa(1),
+            e2: soa(2),
+            ng: soa(3),
+            shape,
+            prim,
+            analytic,
+            more,
+        }
+    }
 }
 
 /// The ray as traversal uses it: splatted origin and inverse direction
@@ -523,9 +581,20 @@ struct Collapse<'a, const W: usize> {
     /// between its children's roots (slots of the left child).
     node_split: Vec<u8>,
     nodes: Vec<Node<W>>,
+    /// Per filled child slot: (wide node, slot, the binary node it holds),
+    /// so that a refit can redo the slot's box.
+    slot_sources: Vec<SlotSource>,
     leaves: Vec<[u32; 4]>,
     leaf_more: Vec<bool>,
     depth: usize,
+}
+
+/// Child slot `slot` of wide node `node` holds binary node `binary`.
+#[derive(Clone, Copy, Debug)]
+struct SlotSource {
+    node: u32,
+    slot: u8,
+    binary: u32,
 }
 
 /// SAH cost, per unit of surface area, of visiting a wide node (its box
@@ -565,6 +634,7 @@ impl<const W: usize> Collapse<'_, W> {
             form: vec![[Form::Leaf; W]; n],
             node_split: vec![0; n],
             nodes: Vec::new(),
+            slot_sources: Vec::new(),
             leaves: Vec::new(),
             leaf_more: Vec::new(),
             depth: 0,
@@ -584,15 +654,25 @@ impl<const W: usize> Collapse<'_, W> {
         if matches!(self.form[0][0], Form::Leaf) {
             // a root leaf: one node with one child
             let leaf = self.leaf(0);
-            let mut n = Node::EMPTY;
-            n.set(0, leaf, self.bvh2.nodes[0].aabb());
-            self.nodes.push(n);
+            self.nodes.push(Node::EMPTY);
+            self.set_slot(0, 0, leaf, 0);
             self.depth = 1;
         } else {
             self.nodes.push(Node::EMPTY);
             self.fill(0, 0, 0);
         }
         self
+    }
+
+    /// Puts `child`, made of binary node `b`, in slot `slot` of wide node
+    /// `idx`, with `b`'s box.
+    fn set_slot(&mut self, idx: usize, slot: usize, child: u32, b: usize) {
+        self.nodes[idx].set(slot, child, self.bvh2.nodes[b].aabb());
+        self.slot_sources.push(SlotSource {
+            node: idx as u32,
+            slot: slot as u8,
+            binary: b as u32,
+        });
     }
 
     /// The most entries a traversal stack holds: each level pushes at
@@ -728,7 +808,7 @@ impl<const W: usize> Collapse<'_, W> {
                 inner.push((self.nodes.len() - 1, b));
                 (self.nodes.len() - 1) as u32
             };
-            self.nodes[idx].set(slot, c, self.bvh2.nodes[b].aabb());
+            self.set_slot(idx, slot, c, b);
         }
         for (n, b) in inner {
             self.fill(n, b, depth + 1);
@@ -760,6 +840,8 @@ pub struct Accel {
     bvh2: Bvh2,
     width: Width,
     nodes: Nodes,
+    /// The binary node each child slot of `nodes` was made of (for refits).
+    slot_sources: Vec<SlotSource>,
     /// Leaf packets.
     tris: HugePageArray<Tri4>,
     /// Traversal stack size the tree needs.
@@ -931,7 +1013,7 @@ impl Accel {
             }
         }
         self.bvh2.refit_all();
-        self.finish(shapes, store);
+        self.refit_wide(shapes, store);
     }
 
     /// Primitives in build order: those of the selected shapes, then one
@@ -1026,6 +1108,7 @@ impl Accel {
                 let c = Collapse::<4>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
                 self.nodes = Nodes::Four(c.nodes.into());
+                self.slot_sources = c.slot_sources;
                 (c.leaves, c.leaf_more)
             }
             #[cfg(target_arch = "x86_64")]
@@ -1033,6 +1116,7 @@ impl Accel {
                 let c = Collapse::<8>::new(&self.bvh2, &analytic).run();
                 self.stack_size = c.stack_size();
                 self.nodes = Nodes::Eight(c.nodes.into());
+                self.slot_sources = c.slot_sources;
                 (c.leaves, c.leaf_more)
             }
             #[cfg(not(target_arch = "x86_64"))]
@@ -1042,50 +1126,36 @@ impl Accel {
         // packed on all cores, so that their cache misses overlap
         let prims = &self.prims;
         self.tris = HugePageArray::from_fn_par(leaves.len(), |i| {
-            let (ids, more) = (&leaves[i], more[i]);
-            let mut lanes = [[Vec3::ZERO; 4]; 4];
-            let mut analytic = 0u32;
             let (mut shape, mut prim) = ([u32::MAX; 4], [u32::MAX; 4]);
-            for (k, &id) in ids.iter().enumerate() {
-                if id == u32::MAX {
-                    continue;
-                }
-                let [s, p] = prims[id as usize];
-                (shape[k], prim[k]) = (s, p);
-                match shapes.get(s as usize) {
-                    // a zero-area face keeps zero edges, like an
-                    // unused lane: never hit (see geometry::mesh)
-                    Some(Shape::Mesh(m)) if m.face_is_degenerate(p as usize) => {}
-                    Some(Shape::Mesh(m)) => {
-                        let [p0, p1, p2] = m.triangle(store, p as usize);
-                        let (e1, e2) = (p0 - p1, p2 - p0);
-                        lanes[k] = [p0, e1, e2, e1.cross(e2)];
-                    }
-                    _ => analytic |= 1 << k,
+            for (k, &id) in leaves[i].iter().enumerate() {
+                if id != u32::MAX {
+                    [shape[k], prim[k]] = prims[id as usize];
                 }
             }
-            let soa = |f: usize| {
-                let axis = |a: usize| {
-                    Vec4::new(
-                        lanes[0][f][a],
-                        lanes[1][f][a],
-                        lanes[2][f][a],
-                        lanes[3][f][a],
-                    )
-                };
-                [axis(0), axis(1), axis(2)]
-            };
-            Tri4 {
-                v0: soa(0),
-                e1: soa(1),
-                e2: soa(2),
-                ng: soa(3),
-                shape,
-                prim,
-                analytic,
-                more,
-            }
+            Tri4::pack(shape, prim, more[i], shapes, store)
         });
+    }
+
+    /// [`Accel::finish`] after a refit of the binary tree: the wide tree
+    /// keeps its shape (the collapse is not planned again), its boxes are
+    /// those of the refitted binary nodes its slots hold, and the leaf
+    /// packets are packed again in place from the current positions.
+    fn refit_wide(&mut self, shapes: &[Shape], store: &ParamStore) {
+        fn refit_boxes<const W: usize>(nodes: &mut [Node<W>], sources: &[SlotSource], bvh2: &Bvh2) {
+            for src in sources {
+                let b = bvh2.nodes[src.binary as usize].aabb();
+                nodes[src.node as usize].set_box(src.slot as usize, b);
+            }
+        }
+        match &mut self.nodes {
+            Nodes::Four(n) => refit_boxes(n, &self.slot_sources, &self.bvh2),
+            #[cfg(target_arch = "x86_64")]
+            Nodes::Eight(n) => refit_boxes(n, &self.slot_sources, &self.bvh2),
+        }
+        self.tris
+            .par_iter_mut()
+            .with_min_len(256)
+            .for_each(|t| *t = Tri4::pack(t.shape, t.prim, t.more, shapes, store));
     }
 
     /// Size and fill of the wide tree (for benchmarks beside other

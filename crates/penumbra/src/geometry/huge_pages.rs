@@ -20,7 +20,7 @@
 
 use std::alloc::{alloc, dealloc, handle_alloc_error, Layout};
 use std::mem::MaybeUninit;
-use std::ops::Deref;
+use std::ops::{Deref, DerefMut};
 use std::ptr::NonNull;
 
 /// Arrays smaller than this stay on ordinary pages (an advised range only
@@ -28,7 +28,8 @@ use std::ptr::NonNull;
 #[cfg_attr(not(target_os = "linux"), allow(dead_code))]
 const HUGE_PAGE: usize = 2 << 20;
 
-/// A fixed-length array of `T`, written once when it is made and then read.
+/// A fixed-length array of `T`, written when it is made (and rewritten in
+/// place when a refit moves its contents).
 pub(crate) struct HugePageArray<T: Copy> {
     ptr: NonNull<T>,
     len: usize,
@@ -49,8 +50,8 @@ enum Storage {
     Mapped(usize),
 }
 
-// SAFETY: the array owns its elements as a `Vec<T>` does, and gives out
-// only shared access to them.
+// SAFETY: the array owns its elements as a `Vec<T>` does (shared access
+// through `&self`, unique access through `&mut self`).
 unsafe impl<T: Copy + Send> Send for HugePageArray<T> {}
 unsafe impl<T: Copy + Sync> Sync for HugePageArray<T> {}
 
@@ -192,6 +193,13 @@ impl<T: Copy> Deref for HugePageArray<T> {
         // SAFETY: `ptr` holds `len` initialised elements (or is dangling
         // with nothing to read).
         unsafe { std::slice::from_raw_parts(self.ptr.as_ptr(), self.len) }
+    }
+}
+
+impl<T: Copy> DerefMut for HugePageArray<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
+        // SAFETY: as for `deref`, and `&mut self` makes the access unique.
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_ptr(), self.len) }
     }
 }
 
