@@ -1002,16 +1002,20 @@ impl Accel {
         self.refresh_analytic(shapes, instances, store);
         let aabbs = self.aabbs(shapes, store);
         let idx = &self.bvh2.primitive_indices;
-        for node in self.bvh2.nodes.iter_mut() {
-            if node.is_leaf() {
+        // (on all cores: a leaf's primitives are scattered over `aabbs`)
+        self.bvh2
+            .nodes
+            .par_iter_mut()
+            .with_min_len(1024)
+            .filter(|node| node.is_leaf())
+            .for_each(|node| {
                 let first = node.first_index as usize;
                 let mut b = Aabb::empty();
                 for &i in &idx[first..first + node.prim_count as usize] {
                     b = b.union(&aabbs[i as usize]);
                 }
                 node.set_aabb(b);
-            }
-        }
+            });
         self.bvh2.refit_all();
         self.refit_wide(shapes, store);
     }
