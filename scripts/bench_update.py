@@ -34,10 +34,13 @@ TARGET = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
 SCENE = os.path.join(ROOT, "scenes", "mesh_heavy.xml")
 KEY = "blob.vertex_positions"
 
+# each side's program; its arguments: the scene file, the parameter key,
+# the number of timed updates
 PENUMBRA = """
 import json, sys, time
 import numpy as np
 import penumbra as pn
+SCENE, KEY, REPS = sys.argv[1], sys.argv[2], int(sys.argv[3])
 scene = pn.load_file(SCENE, res=64, spp=1)
 v = np.array(scene.get_param(KEY))
 times = []
@@ -54,6 +57,7 @@ import json, sys, time
 import drjit as dr
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
+SCENE, KEY, REPS = sys.argv[1], sys.argv[2], int(sys.argv[3])
 scene = mi.load_file(SCENE, res=64, spp=1)
 params = mi.traverse(scene)
 v = mi.Float(params[KEY])
@@ -71,8 +75,8 @@ print("RESULT " + json.dumps({"times": times[1:]}))
 
 
 def run(python, code, reps, env=None):
-    src = code.replace("SCENE", repr(SCENE)).replace("KEY", repr(KEY)).replace("REPS", str(reps))
-    out = subprocess.run([python, "-c", src], capture_output=True, text=True, env=env, cwd=ROOT)
+    out = subprocess.run([python, "-c", code, SCENE, KEY, str(reps)], capture_output=True,
+                         text=True, env=env, cwd=ROOT)
     if out.returncode:
         sys.exit(f"bench_update.py: {python} failed:\n{out.stderr}")
     line = next(l for l in reversed(out.stdout.splitlines()) if l.startswith("RESULT "))

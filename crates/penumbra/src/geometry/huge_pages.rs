@@ -58,13 +58,12 @@ unsafe impl<T: Copy + Sync> Sync for HugePageArray<T> {}
 impl<T: Copy> HugePageArray<T> {
     pub(crate) fn new(items: &[T]) -> HugePageArray<T> {
         let mut array = HugePageArray::with_storage(items.len());
-        // `len` counts the elements written (here all at once: copying
-        // cannot panic)
         // SAFETY: the storage holds `items.len()` elements of `T`, and a
         // fresh allocation does not overlap `items`.
         unsafe {
             std::ptr::copy_nonoverlapping(items.as_ptr(), array.ptr.as_ptr(), items.len());
         }
+        // `len` counts initialised elements: set once they are written
         array.len = items.len();
         array
     }
