@@ -22,7 +22,11 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
       [--jobs grad_rev_bsdf grad_rev_tex grad_fwd_albedo vol_hetero_rev]
-      [--memory cbox|volume_hetero]
+      [--memory cbox|volume_hetero] [--exe PATH]
+
+--exe times another build of the command (default: `cargo build --release`
+of this checkout, <target>/release/penumbra), e.g. the profile-guided one
+of scripts/build_pgo.sh, <target>/pgo/release/penumbra.
 """
 import argparse
 import json
@@ -45,16 +49,16 @@ def last_json(out, prefix=''):
     raise SystemExit(f'no JSON result in:\n{out}')
 
 
-def penumbra(args):
-    out = subprocess.run([EXE, 'grad', *args], capture_output=True, text=True, cwd=ROOT)
+def penumbra(exe, args):
+    out = subprocess.run([exe, 'grad', *args], capture_output=True, text=True, cwd=ROOT)
     if out.returncode:
         raise SystemExit(out.stderr)
     return last_json(out.stdout)
 
 
-def peak_rss_mb(args):
+def peak_rss_mb(exe, args):
     """Peak RSS of a whole penumbra process (GNU time), in MB."""
-    out = subprocess.run(['/usr/bin/time', '-f', 'MAXRSS %M', EXE, 'grad', *args],
+    out = subprocess.run(['/usr/bin/time', '-f', 'MAXRSS %M', exe, 'grad', *args],
                          capture_output=True, text=True, cwd=ROOT)
     if out.returncode:
         raise SystemExit(out.stderr)
@@ -70,8 +74,13 @@ def main():
     ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
+    ap.add_argument('--exe', help='the penumbra command to time (default: built here)')
     a = ap.parse_args()
-    subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
+    exe = a.exe
+    if exe is None:
+        subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT,
+                       check=True)
+        exe = EXE
     r = str(a.reps)
     spp = {'vol_hetero_rev': '32'}
     jobs = {
@@ -98,7 +107,7 @@ def main():
     print('|---|---|---|---|---|---|---|---|---|')
     for name in a.jobs:
         args = jobs[name]
-        ours = penumbra(args)
+        ours = penumbra(exe, args)
         if a.no_mitsuba:
             mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
                   'drjit_cache_files_at_start': '-'}
@@ -131,7 +140,7 @@ def main():
     print(f'\n| max_depth | peak RSS MB (reverse mode, {what}) |')
     print('|---|---|')
     for depth in [2, 4, 8, 16, 32, 64]:
-        mb = peak_rss_mb([*args, '-D', 'res=128', '-D', f'max_depth={depth}', '-o', 'out/bench_grad'])
+        mb = peak_rss_mb(exe, [*args, '-D', 'res=128', '-D', f'max_depth={depth}', '-o', 'out/bench_grad'])
         print(f'| {depth} | {mb:.1f} |', flush=True)
 
 

@@ -17,7 +17,11 @@ faster).
 
   python3 scripts/bench_vs_mitsuba.py [--scenes cbox mesh_heavy bsdfs textured]
       [--spp 64] [--reps 3] [--mitsuba-python ~/.cache/penumbra-mitsuba/venv/bin/python]
-      [--max-depth D [D ...]]
+      [--max-depth D [D ...]] [--exe PATH]
+
+--exe times another build of the command (default: `cargo build --release`
+of this checkout, <target>/release/penumbra), e.g. the profile-guided one
+of scripts/build_pgo.sh, <target>/pgo/release/penumbra.
 
 --max-depth renders each scene at each of the given path depths instead of
 its own (1: camera rays and what they see; 2: plus one bounce and the
@@ -58,9 +62,13 @@ def main():
     ap.add_argument('--no-scalar', action='store_true', help='skip Mitsuba scalar_rgb (slow)')
     ap.add_argument('--max-depth', type=int, nargs='+', default=[None],
                     help="the scenes' $max_depth values to run (default: each scene's own)")
+    ap.add_argument('--exe', help='the penumbra command to time (default: built here)')
     a = ap.parse_args()
-    subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT, check=True)
-    exe = os.path.join(TARGET, 'release', 'penumbra')
+    exe = a.exe
+    if exe is None:
+        subprocess.run(['cargo', 'build', '--release', '-q', '-p', 'penumbra-cli'], cwd=ROOT,
+                       check=True)
+        exe = os.path.join(TARGET, 'release', 'penumbra')
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
     rows = []

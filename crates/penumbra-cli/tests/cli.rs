@@ -396,3 +396,21 @@ fn grad_translate_gives_the_forward_tangent() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("--mode forward"), "{err}");
 }
+
+#[test]
+fn the_profile_guided_builds_training_jobs_run() {
+    // scripts/build_pgo.sh trains the command with these runs: a scene,
+    // key or option they name that no longer exists would fail the build
+    let o = Command::new("python3")
+        .arg(repo().join("scripts/pgo_train.py"))
+        .arg("--cli")
+        .arg(env!("CARGO_BIN_EXE_penumbra"))
+        .output()
+        .expect("python3 runs scripts/pgo_train.py");
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

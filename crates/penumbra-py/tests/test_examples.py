@@ -83,3 +83,16 @@ def test_camera_pose_example_recovers_the_pose():
     )
     t, r = final_errors(out)
     assert t < 0.03 and r < 1.0, out
+
+
+def test_profile_guided_build_trains_on_jobs_that_run():
+    # scripts/build_pgo.sh trains the wheel with these calls: a scene, key
+    # or function they name that no longer exists would fail the build there
+    repo = pathlib.Path(__file__).resolve().parents[3]
+    r = subprocess.run(
+        [sys.executable, str(repo / "scripts" / "pgo_train.py"), "--python"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
