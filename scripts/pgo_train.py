@@ -18,9 +18,11 @@ cores with instrumented code), what the benchmarks and users run:
   python3 scripts/pgo_train.py --cli PATH/TO/penumbra    # the command
   PYTHON scripts/pgo_train.py --python                   # the installed wheel
 
-Both sides run the same table of jobs (JOBS below), through the command's
-subcommands or the Python functions. Run from anywhere; scene paths are
-resolved against the repository. A build tool, not part of the tests.
+Both sides run the same tables of jobs (RENDERS and GRADIENTS below),
+through the command's subcommands or the Python functions. Run from
+anywhere; scene paths are resolved against the repository. A build tool;
+the tests run both sides on the plain builds, so that a job naming a
+scene or key that no longer exists fails a test, not the build.
 """
 import argparse
 import os
@@ -90,6 +92,9 @@ def train_python():
             pn.render_backward(scene, 2.0 * (img - ref) / img.size, spp=spp, keys=[key])
         else:
             value = np.asarray(pn.traverse(scene)[key])
+            if key.endswith("vertex_positions"):
+                # a translation along x, as the command's --translate
+                value = np.broadcast_to(np.float32([0.1, 0.0, 0.0]), value.shape)
             pn.render_forward(scene, {key: value}, spp=spp)
 
     scene = pn.load_file(scene_path("mesh_heavy"), res=64)
