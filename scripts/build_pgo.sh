@@ -51,7 +51,7 @@ if [[ ! -x "$profdata" ]]; then
 fi
 
 # one build: $1 = "generate" or "use", $2 = profile folder or file, then the
-# command that builds (cargo or maturin), run with CARGO_TARGET_DIR=$PGO
+# command that builds (cargo or maturin), into CARGO_TARGET_DIR=$PGO/$1
 build() {
     local kind=$1 path=$2
     shift 2
