@@ -51,11 +51,14 @@ if [[ ! -x "$profdata" ]]; then
 fi
 
 # one build: $1 = "generate" or "use", $2 = profile folder or file, then the
-# command that builds (cargo or maturin), into CARGO_TARGET_DIR=$PGO/$1
+# command that builds (cargo or maturin), into CARGO_TARGET_DIR=$PGO/$1.
+# The profile flag goes through CARGO_BUILD_RUSTFLAGS, which cargo joins to
+# the flags of .cargo/config.toml (RUSTFLAGS would replace them).
 build() {
     local kind=$1 path=$2
     shift 2
-    RUSTFLAGS="${RUSTFLAGS:-} -Cprofile-$kind=$path" CARGO_TARGET_DIR="$PGO/$kind" "$@"
+    CARGO_BUILD_RUSTFLAGS="${CARGO_BUILD_RUSTFLAGS:-} -Cprofile-$kind=$path" \
+        CARGO_TARGET_DIR="$PGO/$kind" "$@"
 }
 
 if [[ $cli == 1 ]]; then
