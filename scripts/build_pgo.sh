@@ -3,9 +3,10 @@
 # wheel: the same code, laid out by the compiler after the branch and call
 # counts of training runs (scripts/pgo_train.py): renders 6-21 % and
 # reverse-mode gradients 15-18 % faster than `cargo build --release` on
-# this project's benchmarks, images bit for bit the same (docs/perf/pgo.md). Takes about twice a
-# plain release build: each side is built instrumented, run on the
-# training jobs, and built again with the merged profile.
+# this project's benchmarks, images bit for bit the same
+# (docs/perf/pgo.md). Takes about twice a plain release build: each side
+# is built instrumented, run on the training jobs, and built again with
+# the merged profile.
 #
 #   scripts/build_pgo.sh            # both: <target>/pgo/release/penumbra and
 #                                   #       <target>/pgo/wheels/penumbra-*.whl
