@@ -17,11 +17,17 @@ faster).
 
   python3 scripts/bench_vs_mitsuba.py [--scenes cbox mesh_heavy bsdfs textured]
       [--spp 64] [--reps 3] [--mitsuba-python ~/.cache/penumbra-mitsuba/venv/bin/python]
-      [--max-depth D [D ...]] [--exe PATH]
+      [--max-depth D [D ...]] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
 --exe times another build of the command (default: `cargo build --release`
 of this checkout, <target>/release/penumbra), e.g. the profile-guided one
 of scripts/build_pgo.sh, <target>/pgo/release/penumbra.
+
+--mitsuba-lanes N [N ...] also times Mitsuba llvm_ad_rgb warm with its
+kernels compiled N lanes wide (Dr.Jit's jit_llvm_set_target, same CPU; 4 is
+the narrowest Embree takes), beside the CPU's own width: Dr.Jit compiles 16
+lanes wide where the CPU has AVX-512 and 8 with AVX2, so the same code is
+measured at another machine's width. The table names the widths.
 
 --max-depth renders each scene at each of the given path depths instead of
 its own (1: camera rays and what they see; 2: plus one bounce and the
@@ -63,6 +69,8 @@ def main():
     ap.add_argument('--max-depth', type=int, nargs='+', default=[None],
                     help="the scenes' $max_depth values to run (default: each scene's own)")
     ap.add_argument('--exe', help='the penumbra command to time (default: built here)')
+    ap.add_argument('--mitsuba-lanes', type=int, nargs='+', default=[],
+                    help='also time Mitsuba llvm warm with kernels this many lanes wide')
     a = ap.parse_args()
     exe = a.exe
     if exe is None:
@@ -79,11 +87,14 @@ def main():
             name = s if depth is None else f'{s}, max_depth {depth}'
             ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
                              '--reps', str(a.reps), *ours_depth])
-            def mitsuba_fwd(variant, reps, run_env):
+            def mitsuba_fwd(variant, reps, run_env, lanes=()):
                 return run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
                                  variant, '--spp', str(a.spp), '--reps', str(reps),
-                                 *their_depth], run_env, 'RESULT ')
+                                 *their_depth, *lanes], run_env, 'RESULT ')
             llvm = mitsuba_fwd('llvm_ad_rgb', a.reps, env)
+            llvm['warm_by_lanes'] = [
+                mitsuba_fwd('llvm_ad_rgb', a.reps, env, ['--lanes', str(n)])['warm_median_s']
+                for n in a.mitsuba_lanes]
             with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
                 cold = mitsuba_fwd('llvm_ad_rgb', 1, dict(env, HOME=cold_home))
             llvm['first_cold_s'] = cold['first_s']
@@ -92,21 +103,30 @@ def main():
             print(f'{name}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} '
                   f'(cache files at start: {llvm["drjit_cache_files_at_start"]}), '
                   f'first with an empty cache {llvm["first_cold_s"]:.3f}, '
-                  f'warm {llvm["warm_median_s"]:.3f}', file=sys.stderr, flush=True)
+                  f'warm {llvm["warm_median_s"]:.3f} ({llvm["llvm_vector_width"]} lanes, '
+                  f'{llvm["llvm_target_cpu"]}), warm at {a.mitsuba_lanes} lanes '
+                  f'{llvm["warm_by_lanes"]}', file=sys.stderr, flush=True)
+    own = rows[0][2]
+    print(f'\nMitsuba llvm_ad_rgb compiles for {own["llvm_target_cpu"]}, '
+          f'{own["llvm_vector_width"]} lanes wide.')
+    lanes_heads = ''.join(f' | Mitsuba llvm warm s, {n} lanes | llvm {n} lanes / Penumbra warm'
+                          for n in a.mitsuba_lanes)
     print(f'\n| scene ({a.spp} spp, 256²) | Penumbra first s | Penumbra warm s | Penumbra peak MB '
           '| Mitsuba llvm first s, empty cache | Mitsuba llvm first s (cache files) '
           '| Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
           '| llvm warm / Penumbra warm | llvm first, empty cache / Penumbra first '
-          '| llvm first / Penumbra first | scalar / Penumbra |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          f'| llvm first / Penumbra first | scalar / Penumbra{lanes_heads} |')
+    print('|---' * (13 + 2 * len(a.mitsuba_lanes)) + '|')
     for s, o, l, sc in rows:
         sc_t = sc['warm_median_s'] if sc else float('nan')
+        by_lanes = ''.join(f' | {t:.3f} | {t / o["warm_median_s"]:.2f}'
+                           for t in l['warm_by_lanes'])
         print(f'| {s} | {o["first_s"]:.3f} | {o["warm_median_s"]:.3f} | {o["peak_rss_mb"]:.0f} '
               f'| {l["first_cold_s"]:.3f} | {l["first_s"]:.3f} ({l["drjit_cache_files_at_start"]}) '
               f'| {l["warm_median_s"]:.3f} | {l["peak_rss_mb_inproc"]:.0f} '
               f'| {sc_t:.3f} | {l["warm_median_s"] / o["warm_median_s"]:.2f} '
               f'| {l["first_cold_s"] / o["first_s"]:.2f} '
-              f'| {l["first_s"] / o["first_s"]:.2f} | {sc_t / o["warm_median_s"]:.2f} |')
+              f'| {l["first_s"] / o["first_s"]:.2f} | {sc_t / o["warm_median_s"]:.2f}{by_lanes} |')
 
 
 if __name__ == '__main__':

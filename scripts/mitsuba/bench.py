@@ -475,7 +475,13 @@ def main():
     ap.add_argument('--integrator', default='direct_projective')
     ap.add_argument('--param', default='albedo')
     ap.add_argument('--eps', type=float, default=0.01)
+    ap.add_argument('--lanes', type=int, default=None,
+                    help='llvm variants: compile kernels this many lanes wide (default: '
+                         "the CPU's vector width, 16 with AVX-512, 8 with AVX2)")
     a = ap.parse_args()
+    if a.lanes is not None:
+        C.setup(a.variant)
+        C.set_llvm_lanes(a.lanes)
     t0 = time.perf_counter()
     res = TASKS[a.task](a)
     res = dict(task=a.task, variant=C.mi.variant(), scene=a.scene if a.task in ('fwd', 'ref', 'target') else None,
@@ -485,6 +491,7 @@ def main():
         import drjit as dr
         res['llvm_version'] = list(dr.detail.llvm_version())
         res['threads'] = dr.thread_count()
+        res.update(C.llvm_target() or {})
     C.emit(res)
 
 

@@ -35,6 +35,40 @@ def is_jit():
     return mi.variant().startswith(('llvm', 'cuda'))
 
 
+def _drjit_core():
+    """Dr.Jit's core library, for the LLVM back end's target settings,
+    which its Python module does not expose (C++ symbols of Dr.Jit 1.5.0)."""
+    import ctypes
+    return ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), 'libdrjit-core.so'))
+
+
+def llvm_target():
+    """What the LLVM back end compiles kernels for: the CPU, and the vector
+    width (lanes per instruction; 16 where the CPU has AVX-512, 8 with
+    AVX2). None on other variants."""
+    import ctypes
+    if not mi.variant().startswith('llvm'):
+        return None
+    lib = _drjit_core()
+    cpu = lib._Z19jit_llvm_target_cpuv
+    cpu.restype = ctypes.c_char_p
+    width = lib._Z21jit_llvm_vector_widthv
+    width.restype = ctypes.c_uint32
+    return {'llvm_target_cpu': cpu().decode(), 'llvm_vector_width': width()}
+
+
+def set_llvm_lanes(lanes):
+    """Compiles the LLVM back end's kernels `lanes` wide (a power of two) for
+    the same CPU: e.g. 8 on an AVX-512 machine gives the code Dr.Jit writes
+    for AVX2 machines. Call before anything is evaluated."""
+    import ctypes
+    lib = _drjit_core()
+    cpu = llvm_target()['llvm_target_cpu'].encode()
+    set_target = lib._Z19jit_llvm_set_targetPKcS0_j
+    set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+    set_target(cpu, None, lanes)
+
+
 def disk_cache_state():
     d = os.path.join(os.path.expanduser('~'), '.drjit')
     n = len([f for f in os.listdir(d) if f.endswith(".bin")]) if os.path.isdir(d) else 0
