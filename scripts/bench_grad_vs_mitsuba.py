@@ -22,11 +22,15 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
       [--jobs grad_rev_bsdf grad_rev_tex grad_fwd_albedo vol_hetero_rev]
-      [--memory cbox|volume_hetero] [--exe PATH]
+      [--memory cbox|volume_hetero] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
 --exe times another build of the command (default: `cargo build --release`
 of this checkout, <target>/release/penumbra), e.g. the profile-guided one
 of scripts/build_pgo.sh, <target>/pgo/release/penumbra.
+
+--mitsuba-lanes N [N ...] also times Mitsuba warm with its kernels compiled
+N lanes wide (scripts/mitsuba/bench.py --lanes; Dr.Jit compiles 16 lanes
+wide where the CPU has AVX-512, 8 with AVX2). The table names the widths.
 """
 import argparse
 import json
@@ -75,6 +79,8 @@ def main():
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
     ap.add_argument('--exe', help='the penumbra command to time (default: built here)')
+    ap.add_argument('--mitsuba-lanes', type=int, nargs='+', default=[],
+                    help='also time Mitsuba warm with kernels this many lanes wide')
     a = ap.parse_args()
     exe = a.exe
     if exe is None:
@@ -100,33 +106,40 @@ def main():
     }
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get(
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
+    lanes_heads = ''.join(f' | Mitsuba prb warm s, {n} lanes | {n} lanes / Penumbra warm'
+                          for n in a.mitsuba_lanes)
     print('| job (128²) | Penumbra first s | Penumbra warm s | Mitsuba prb first s, empty cache '
-          '| Mitsuba prb first s (cache files) | Mitsuba prb warm s '
+          '| Mitsuba prb first s (cache files) | Mitsuba prb warm s (lanes) '
           '| Mitsuba warm / Penumbra warm | Mitsuba first, empty cache / Penumbra first '
-          '| Mitsuba first / Penumbra first |')
-    print('|---|---|---|---|---|---|---|---|---|')
+          f'| Mitsuba first / Penumbra first{lanes_heads} |')
+    print('|---' * (9 + 2 * len(a.mitsuba_lanes)) + '|')
     for name in a.jobs:
         args = jobs[name]
         ours = penumbra(exe, args)
         if a.no_mitsuba:
             mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
-                  'drjit_cache_files_at_start': '-'}
+                  'drjit_cache_files_at_start': '-', 'llvm_vector_width': '-'}
             cold = {'first_s': float('nan')}
+            by_lanes = [float('nan')] * len(a.mitsuba_lanes)
         else:
-            def mitsuba(reps, run_env):
+            def mitsuba(reps, run_env, lanes=()):
                 out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
-                                      '--spp', spp.get(name, '64'), '--reps', reps],
+                                      '--spp', spp.get(name, '64'), '--reps', reps, *lanes],
                                      capture_output=True, text=True, env=run_env)
                 return last_json(out.stdout, 'RESULT ')
             mi = mitsuba(r, env)
             with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
                 cold = mitsuba('1', dict(env, HOME=cold_home))
+            by_lanes = [mitsuba(r, env, ['--lanes', str(n)])['warm_median_s']
+                        for n in a.mitsuba_lanes]
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
               f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
-              f'| {mi["warm_median_s"]:.3f} '
+              f'| {mi["warm_median_s"]:.3f} ({mi["llvm_vector_width"]}) '
               f'| {mi["warm_median_s"] / ours["warm_median_s"]:.2f} '
               f'| {cold["first_s"] / ours["first_s"]:.2f} '
-              f'| {mi["first_s"] / ours["first_s"]:.2f} |', flush=True)
+              f'| {mi["first_s"] / ours["first_s"]:.2f}'
+              + ''.join(f' | {t:.3f} | {t / ours["warm_median_s"]:.2f}' for t in by_lanes)
+              + ' |', flush=True)
     memory = {
         'cbox': ('cbox 128², 64 spp', ['scenes/cbox.xml', '--param', 'red.reflectance.value',
                                         '--init', '0.4', '--target', 'scenes/refs/cbox_target128.exr',
