@@ -106,9 +106,14 @@ impl DirectIntegrator {
         if bsdf.flags().has(BsdfFlags::SMOOTH) {
             for _ in 0..self.emitter_samples {
                 let u = rng.next_2d();
-                if let Some(es) = scene.sample_emitter_direction::<R>(store, &si, u) {
+                if let Some(es) = scene.sample_emitter::<R>(store, si.p, u) {
                     let wo = si.to_local(es.d);
                     let f = bsdf_ctx.eval(wo);
+                    // a value of zero without a derivative adds nothing
+                    // (one with a derivative does, for forward mode)
+                    if (f.is_zero() && f.is_const()) || !scene.emitter_visible(&si, &es) {
+                        continue;
+                    }
                     let w = if es.ds.delta {
                         1.0 / ne
                     } else {

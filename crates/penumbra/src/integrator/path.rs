@@ -155,10 +155,10 @@ impl PathIntegrator {
             // next-event estimation
             let u_light = rng.next_2d();
             if bsdf.flags().has(BsdfFlags::SMOOTH) {
-                if let Some(es) = scene.sample_emitter_direction::<R>(store, si, u_light) {
+                if let Some(es) = scene.sample_emitter::<R>(store, si.p, u_light) {
                     let wo = si.to_local(es.d);
                     let f = bsdf_ctx.eval(wo);
-                    if !f.is_zero() {
+                    if !f.is_zero() && scene.emitter_visible(si, &es) {
                         let w = if es.ds.delta {
                             1.0
                         } else {

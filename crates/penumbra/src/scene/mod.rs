@@ -262,27 +262,26 @@ impl Scene {
         Some(es)
     }
 
-    /// [`Scene::sample_emitter`] from `si`, and tests visibility: `None` if
-    /// occluded.
-    pub fn sample_emitter_direction<R: Real>(
+    /// Whether nothing lies between `si` and the point (or, for an emitter
+    /// at infinity, the direction) of the emitter sample `es` taken from it:
+    /// the shadow ray of next-event estimation. Integrators test it after
+    /// the BSDF's value for the sample's direction, and only where that is
+    /// nonzero: a light behind a reflecting surface (half the directions
+    /// of an environment's uniform samples) needs no traversal.
+    pub fn emitter_visible<R: Real>(
         &self,
-        store: &ParamView,
         si: &SurfaceInteraction<R>,
-        u: Vec2,
-    ) -> Option<EmitterSample<R>> {
-        let es = self.sample_emitter(store, si.p, u)?;
+        es: &EmitterSample<R>,
+    ) -> bool {
         let ray = if es.ds.dist.is_finite() {
             si.spawn_ray_to(es.ds.p)
         } else {
             si.spawn_ray(es.ds.d)
         };
-        if self.occluded(&ray) {
-            return None;
-        }
-        Some(es)
+        !self.occluded(&ray)
     }
 
-    /// Solid-angle density with which [`Scene::sample_emitter_direction`]
+    /// Solid-angle density with which [`Scene::sample_emitter`]
     /// picks direction `d` from `ref_p` towards emitter `em`, reaching the
     /// point `p` with normal `n`.
     pub fn pdf_emitter_direction(&self, em: u32, ref_p: Vec3, d: Vec3, p: Vec3, n: Vec3) -> f32 {
