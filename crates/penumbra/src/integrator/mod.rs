@@ -345,19 +345,38 @@ pub(crate) fn survives_roulette<R: Real>(
     rr_depth: u32,
     rng: &mut SampleStream,
 ) -> bool {
-    let u = rng.next_1d();
-    let t_max = throughput.val().max_element() * eta * eta;
-    if !(t_max > 0.0) {
+    let Some(survival) = roulette(throughput.val(), eta, depth, rr_depth, rng) else {
         return false;
-    }
-    if depth >= rr_depth {
-        let q = t_max.min(0.95);
-        if u >= q {
-            return false;
-        }
+    };
+    if let Some(q) = survival {
         *throughput *= R::cst(1.0 / q);
     }
     true
+}
+
+/// The decision of [`survives_roulette`] for a path whose throughput will
+/// be `throughput` (primal), for a caller that applies it later: `None`
+/// if the path ends; otherwise `Some(q)` where it survived the roulette
+/// with probability `q` (its throughput is to be divided by `q`), or
+/// `Some(None)` before depth `rr_depth`.
+#[allow(clippy::option_option)]
+pub(crate) fn roulette(
+    throughput: glam::Vec3,
+    eta: f32,
+    depth: u32,
+    rr_depth: u32,
+    rng: &mut SampleStream,
+) -> Option<Option<f32>> {
+    let u = rng.next_1d();
+    let t_max = throughput.max_element() * eta * eta;
+    if !(t_max > 0.0) {
+        return None;
+    }
+    if depth < rr_depth {
+        return Some(None);
+    }
+    let q = t_max.min(0.95);
+    (u < q).then_some(Some(q))
 }
 
 /// Balance of two sampling strategies by the power heuristic (β = 2).

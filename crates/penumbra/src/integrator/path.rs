@@ -4,7 +4,7 @@
 //! tracers `prb`, `prb_basic` and `prb_projective`: here one estimator
 //! serves the primal and both derivative modes).
 
-use super::{mis_weight, scatter, survives_roulette, Budgets};
+use super::{mis_weight, roulette, scatter, Budgets};
 use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
@@ -175,9 +175,28 @@ impl PathIntegrator {
             let Some(bs) = bsdf_ctx.sample(u1, u2) else {
                 return result;
             };
+            eta *= bs.eta;
+            // Russian roulette before the bounce's ray is traced (as
+            // Mitsuba): a path it ends costs no traversal and no vertex.
+            // It sees the throughput after the bounce, whose primal value
+            // is that of the sample's weight (`scatter`'s weight carries
+            // the derivatives of attached geometry; its value may differ
+            // in the last bit, which only moves the survival probability
+            // by as much).
+            let Some(survival) = roulette(
+                throughput.val() * bs.weight.val(),
+                eta,
+                depth,
+                self.rr_depth,
+                rng,
+            ) else {
+                return result;
+            };
             let bounce = scatter(scene, store, &bsdf_ctx, si, &bs, next);
             throughput = throughput.mul_elem(bounce.weight);
-            eta *= bs.eta;
+            if let Some(q) = survival {
+                throughput *= R::cst(1.0 / q);
+            }
             ray = bounce.ray;
             ray_d = bounce.d;
             prev_p = si.p.val();
@@ -185,10 +204,6 @@ impl PathIntegrator {
             current = 1 - current;
             prev_pdf = bs.pdf;
             prev_delta = bounce.delta;
-
-            if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
-                return result;
-            }
             depth += 1;
         }
     }

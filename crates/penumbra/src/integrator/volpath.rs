@@ -155,11 +155,12 @@ impl VolPathIntegrator {
                             pdf,
                             delta: !m.sample_emitters,
                         };
-                        ray = Ray::new(p, wo);
-                        hit = scene.intersect(&ray);
+                        // the roulette first: a path it ends traces no ray
                         if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
                             return result;
                         }
+                        ray = Ray::new(p, wo);
+                        hit = scene.intersect(&ray);
                         continue;
                     }
                     FreeFlight::Pass { weight } => throughput = throughput.mul_elem(weight),
@@ -266,11 +267,11 @@ impl VolPathIntegrator {
                     delta: bs.lobe.has(BsdfFlags::DELTA),
                 };
             }
-            ray = si.spawn_ray(d);
-            hit = scene.intersect(&ray);
             if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
                 return result;
             }
+            ray = si.spawn_ray(d);
+            hit = scene.intersect(&ray);
         }
     }
 
