@@ -359,7 +359,6 @@ pub(crate) fn survives_roulette<R: Real>(
 /// if the path ends; otherwise `Some(q)` where it survived the roulette
 /// with probability `q` (its throughput is to be divided by `q`), or
 /// `Some(None)` before depth `rr_depth`.
-#[allow(clippy::option_option)]
 pub(crate) fn roulette(
     throughput: glam::Vec3,
     eta: f32,
