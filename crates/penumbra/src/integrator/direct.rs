@@ -74,23 +74,25 @@ impl DirectIntegrator {
     }
 
     /// Radiance through the camera sample `cs`, in `R`, with every vertex
-    /// re-evaluated in `R` as the path integrator does.
+    /// re-evaluated in `R` as the path integrator does, and whether the
+    /// camera ray reached a surface.
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
         store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-    ) -> Spectrum<R> {
+    ) -> (Spectrum<R>, bool) {
         let camera_ray = cs.ray_if_moving::<R>(store);
         let ray = camera_ray.val();
         let Some(hit) = scene.intersect(&ray) else {
-            return match scene.environment {
+            let le = match scene.environment {
                 Some(env) if !self.hide_emitters => {
                     scene.emitters[env as usize].eval_environment(store, camera_ray.d)
                 }
                 _ => Spectrum::zero(),
             };
+            return (le, false);
         };
         let si = scene.surface_interaction::<R>(store, &camera_ray, &hit);
         let mut result = Spectrum::<R>::zero();
@@ -166,6 +168,6 @@ impl DirectIntegrator {
             };
             result += b.weight.mul_elem(le) * R::cst(w);
         }
-        result
+        (result, true)
     }
 }

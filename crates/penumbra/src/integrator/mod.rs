@@ -138,24 +138,33 @@ impl Integrator {
         )))
     }
 
-    /// Primal estimate along `ray`, written to `out` (`channel_count()`
-    /// values).
+    /// Primal estimate through the camera sample `cs`, written to `out`
+    /// (`channel_count()` values). Returns whether the camera ray reached
+    /// a surface (the alpha of an rgba film) where the integrator traced
+    /// it (`None` for `aov` and `moment`).
     pub fn sample(
         &self,
         scene: &Scene,
         cs: &CameraSample,
         rng: &mut SampleStream,
         out: &mut [f32],
-    ) {
-        match self {
-            Integrator::Aov(a) => return a.sample(scene, cs, rng, out),
-            Integrator::Moment(m) => return m.sample(scene, cs, rng, out),
-            Integrator::Path(_) | Integrator::Direct(_) | Integrator::VolPath(_) => {}
-        }
-        let rgb = self
-            .radiance::<f32>(scene, &scene.params.primal(), cs, rng)
-            .expect("path and direct integrators estimate radiance");
+    ) -> Option<bool> {
+        let store = scene.params.primal();
+        let (rgb, hit) = match self {
+            Integrator::Aov(a) => {
+                a.sample(scene, cs, rng, out);
+                return None;
+            }
+            Integrator::Moment(m) => {
+                m.sample(scene, cs, rng, out);
+                return None;
+            }
+            Integrator::Path(p) => p.sample::<f32>(scene, &store, cs, rng),
+            Integrator::Direct(d) => d.sample::<f32>(scene, &store, cs, rng),
+            Integrator::VolPath(v) => v.sample::<f32>(scene, &store, cs, rng),
+        };
         out[..3].copy_from_slice(&rgb.val().to_array());
+        Some(hit)
     }
 
     /// The radiance estimate through camera sample `cs` in `R` (primal for
@@ -174,9 +183,9 @@ impl Integrator {
         rng: &mut SampleStream,
     ) -> Option<Spectrum<R>> {
         match self {
-            Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng)),
-            Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
-            Integrator::VolPath(v) => Some(v.sample::<R>(scene, store, cs, rng)),
+            Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng).0),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng).0),
+            Integrator::VolPath(v) => Some(v.sample::<R>(scene, store, cs, rng).0),
             Integrator::Aov(_) | Integrator::Moment(_) => None,
         }
     }
@@ -199,7 +208,14 @@ impl Integrator {
         let store = scene.params.primal();
         match self {
             Integrator::Path(p) => p
-                .trace::<f32>(scene, &store, DiffRay::cst(ray), 1, rng)
+                .trace::<f32>(
+                    scene,
+                    &store,
+                    DiffRay::cst(ray),
+                    scene.intersect(ray),
+                    1,
+                    rng,
+                )
                 .val(),
             Integrator::Direct(_) => match scene.intersect(ray) {
                 Some(hit) => match scene.shape_emitter(hit.shape) {

@@ -9,7 +9,7 @@ use crate::ad::Real;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
 use crate::emitter::EmitterT;
 use crate::error::Result;
-use crate::geometry::DiffRay;
+use crate::geometry::{DiffRay, Hit};
 use crate::math::Spectrum;
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
@@ -53,18 +53,24 @@ impl PathIntegrator {
     /// Every vertex is re-evaluated in `R` (attached local geometry): the
     /// first slides along the camera ray, the next ones follow
     /// [`super::scatter`]'s parameterisation, emitter samples move with
-    /// their emitter.
+    /// their emitter. Also returns whether the camera ray reached a surface.
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
         store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-    ) -> Spectrum<R> {
-        self.trace(scene, store, cs.ray_if_moving::<R>(store), 0, rng)
+    ) -> (Spectrum<R>, bool) {
+        let camera_ray = cs.ray_if_moving::<R>(store);
+        let hit = scene.intersect(&camera_ray.val());
+        (
+            self.trace(scene, store, camera_ray, hit, 0, rng),
+            hit.is_some(),
+        )
     }
 
-    /// The radiance arriving along `camera_ray`, whose end is a vertex of
+    /// The radiance arriving along `camera_ray`, which reaches `hit` (what
+    /// the scene's `intersect` gives for it), whose end is a vertex of
     /// depth `depth` (0: the first one the camera sees), estimated by
     /// continuing the path from there;
     /// what it reaches first counts with its whole emission (as after a
@@ -74,6 +80,7 @@ impl PathIntegrator {
         scene: &Scene,
         store: &ParamView,
         camera_ray: DiffRay<R>,
+        mut hit: Option<Hit>,
         mut depth: u32,
         rng: &mut SampleStream,
     ) -> Spectrum<R> {
@@ -88,7 +95,6 @@ impl PathIntegrator {
         let mut prev_p = ray.o;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
-        let mut hit = scene.intersect(&ray);
         // the current vertex and the next one, in two slots that swap
         // roles at each bounce (`scatter` writes the next vertex in place:
         // a surface interaction is a few hundred bytes)

@@ -90,18 +90,17 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
                 // colour, alpha, then any further (AOV) channels
                 let mut buf = [0.0f32; 64];
                 let rest = &mut buf[..n];
-                integrator.sample(scene, cs, rng, rest);
+                // the integrator's own camera ray where it traced one
+                let hit = integrator.sample(scene, cs, rng, rest).unwrap_or_else(|| {
+                    let ray = cs.ray::<f32>(&scene.params.primal()).val();
+                    scene.intersect(&ray).is_some()
+                });
                 let k = 3.min(n);
                 out[..k].copy_from_slice(&rest[..k]);
-                let ray = cs.ray::<f32>(&scene.params.primal()).val();
-                out[k] = if scene.intersect(&ray).is_some() {
-                    1.0
-                } else {
-                    0.0
-                };
+                out[k] = if hit { 1.0 } else { 0.0 };
                 out[k + 1..].copy_from_slice(&rest[k..]);
             } else {
-                integrator.sample(scene, cs, rng, out)
+                integrator.sample(scene, cs, rng, out);
             }
         })?;
     Ok(Rendered {

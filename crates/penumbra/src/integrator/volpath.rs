@@ -85,23 +85,28 @@ impl VolPathIntegrator {
     }
 
     /// Radiance arriving through the camera sample `cs`, estimated with one
-    /// path in `R`.
+    /// path in `R`, and whether the camera ray reached a surface.
     pub fn sample<R: Real>(
         &self,
         scene: &Scene,
         store: &ParamView,
         cs: &CameraSample,
         rng: &mut SampleStream,
-    ) -> Spectrum<R> {
+    ) -> (Spectrum<R>, bool) {
         let ray = cs.ray::<f32>(store).val();
-        self.trace(scene, store, ray, cs.sensor.medium, rng)
+        let hit = scene.intersect(&ray);
+        let radiance = self.trace(scene, store, ray, hit, cs.sensor.medium, rng);
+        (radiance, hit.is_some())
     }
 
+    /// The radiance arriving along `ray`, which first reaches `hit`, from
+    /// a path that starts in `medium`.
     fn trace<R: Real>(
         &self,
         scene: &Scene,
         store: &ParamView,
         mut ray: Ray,
+        mut hit: Option<Hit>,
         mut medium: Option<u32>,
         rng: &mut SampleStream,
     ) -> Spectrum<R> {
@@ -114,7 +119,6 @@ impl VolPathIntegrator {
             pdf: 1.0,
             delta: true,
         };
-        let mut hit = scene.intersect(&ray);
         let mut bsdf_ctx = BsdfContext::empty();
         loop {
             // ------------------------- the medium --------------------------
