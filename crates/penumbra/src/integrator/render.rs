@@ -412,6 +412,52 @@ mod tests {
     }
 
     #[test]
+    fn the_alpha_of_an_rgba_film_is_where_the_camera_rays_reach_a_surface() {
+        // path, direct and volpath report whether their own camera ray hit
+        // something; an aov integrator's alpha comes from tracing the camera
+        // ray again. The camera samples do not depend on the integrator, so
+        // the alpha channels must agree value for value, and the scene
+        // shows both surfaces and the environment.
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/textured.xml");
+        let text = std::fs::read_to_string(&file).unwrap().replace(
+            r#"name="pixel_format" value="rgb""#,
+            r#"name="pixel_format" value="rgba""#,
+        );
+        let path_integrator = r#"<integrator type="path" id="integrator">
+        <integer name="max_depth" value="$max_depth"/>
+    </integrator>"#;
+        assert!(text.contains(path_integrator) && text.contains("rgba"));
+        let alpha = |integrator: &str| {
+            let xml = text.replace(path_integrator, integrator);
+            let d = [
+                ("res".to_string(), "24".to_string()),
+                ("spp".to_string(), "4".to_string()),
+            ];
+            let scene = Scene::load_str(&xml, &file, &d).unwrap();
+            let img = render(&scene, &RenderOptions::default()).unwrap();
+            let a = img.channel_names.iter().position(|c| c == "A").unwrap();
+            let n = img.channels();
+            img.data.chunks(n).map(|px| px[a]).collect::<Vec<f32>>()
+        };
+        let traced_again = alpha(
+            r#"<integrator type="aov"><string name="aovs" value="dd.y:depth"/></integrator>"#,
+        );
+        let covered = traced_again.iter().filter(|&&a| a == 1.0).count();
+        let empty = traced_again.iter().filter(|&&a| a == 0.0).count();
+        assert!(
+            covered > 0 && empty > 0,
+            "{covered} covered, {empty} empty pixels"
+        );
+        for integrator in [
+            path_integrator,
+            r#"<integrator type="direct"/>"#,
+            r#"<integrator type="volpath"/>"#,
+        ] {
+            assert_eq!(alpha(integrator), traced_again, "{integrator}");
+        }
+    }
+
+    #[test]
     fn buffer_estimate_covers_the_images_of_a_pass() {
         let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cbox.xml");
         let d = [("res".to_string(), "64".to_string())];
