@@ -364,34 +364,43 @@ pub(crate) fn survives_roulette<R: Real>(
     let Some(survival) = roulette(throughput.val(), eta, depth, rr_depth, rng) else {
         return false;
     };
-    if let Some(q) = survival {
-        *throughput *= R::cst(1.0 / q);
-    }
+    survival.apply(throughput);
     true
+}
+
+/// A path that goes on after Russian roulette: with the probability `q`
+/// it survived with, or `None` before the roulette's depth.
+pub(crate) struct Survival(Option<f32>);
+
+impl Survival {
+    /// Divides the surviving path's throughput by its survival probability.
+    pub(crate) fn apply<R: Real>(self, throughput: &mut Spectrum<R>) {
+        if let Some(q) = self.0 {
+            *throughput *= R::cst(1.0 / q);
+        }
+    }
 }
 
 /// The decision of [`survives_roulette`] for a path whose throughput will
 /// be `throughput` (primal), for a caller that applies it later: `None`
-/// if the path ends; otherwise `Some(q)` where it survived the roulette
-/// with probability `q` (its throughput is to be divided by `q`), or
-/// `Some(None)` before depth `rr_depth`.
+/// if the path ends.
 pub(crate) fn roulette(
     throughput: glam::Vec3,
     eta: f32,
     depth: u32,
     rr_depth: u32,
     rng: &mut SampleStream,
-) -> Option<Option<f32>> {
+) -> Option<Survival> {
     let u = rng.next_1d();
     let t_max = throughput.max_element() * eta * eta;
     if !(t_max > 0.0) {
         return None;
     }
     if depth < rr_depth {
-        return Some(None);
+        return Some(Survival(None));
     }
     let q = t_max.min(0.95);
-    (u < q).then_some(Some(q))
+    (u < q).then_some(Survival(Some(q)))
 }
 
 /// Balance of two sampling strategies by the power heuristic (β = 2).

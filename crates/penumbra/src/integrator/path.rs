@@ -200,9 +200,7 @@ impl PathIntegrator {
             };
             let bounce = scatter(scene, store, &bsdf_ctx, si, &bs, next);
             throughput = throughput.mul_elem(bounce.weight);
-            if let Some(q) = survival {
-                throughput *= R::cst(1.0 / q);
-            }
+            survival.apply(&mut throughput);
             ray = bounce.ray;
             ray_d = bounce.d;
             prev_p = si.p.val();
