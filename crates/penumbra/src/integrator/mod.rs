@@ -149,8 +149,7 @@ impl Integrator {
         rng: &mut SampleStream,
         out: &mut [f32],
     ) -> Option<bool> {
-        let store = scene.params.primal();
-        let (rgb, hit) = match self {
+        match self {
             Integrator::Aov(a) => {
                 a.sample(scene, cs, rng, out);
                 return None;
@@ -159,10 +158,11 @@ impl Integrator {
                 m.sample(scene, cs, rng, out);
                 return None;
             }
-            Integrator::Path(p) => p.sample::<f32>(scene, &store, cs, rng),
-            Integrator::Direct(d) => d.sample::<f32>(scene, &store, cs, rng),
-            Integrator::VolPath(v) => v.sample::<f32>(scene, &store, cs, rng),
-        };
+            Integrator::Path(_) | Integrator::Direct(_) | Integrator::VolPath(_) => {}
+        }
+        let (rgb, hit) = self
+            .estimate::<f32>(scene, &scene.params.primal(), cs, rng)
+            .expect("path, direct and volpath estimate radiance");
         out[..3].copy_from_slice(&rgb.val().to_array());
         Some(hit)
     }
@@ -182,10 +182,22 @@ impl Integrator {
         cs: &CameraSample,
         rng: &mut SampleStream,
     ) -> Option<Spectrum<R>> {
+        self.estimate(scene, store, cs, rng).map(|(l, _)| l)
+    }
+
+    /// [`Integrator::radiance`] and whether the camera ray reached a
+    /// surface.
+    fn estimate<R: Real>(
+        &self,
+        scene: &Scene,
+        store: &ParamView,
+        cs: &CameraSample,
+        rng: &mut SampleStream,
+    ) -> Option<(Spectrum<R>, bool)> {
         match self {
-            Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng).0),
-            Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng).0),
-            Integrator::VolPath(v) => Some(v.sample::<R>(scene, store, cs, rng).0),
+            Integrator::Path(p) => Some(p.sample::<R>(scene, store, cs, rng)),
+            Integrator::Direct(d) => Some(d.sample::<R>(scene, store, cs, rng)),
+            Integrator::VolPath(v) => Some(v.sample::<R>(scene, store, cs, rng)),
             Integrator::Aov(_) | Integrator::Moment(_) => None,
         }
     }
