@@ -886,11 +886,15 @@ impl QuadSampling {
         // weights of (own vertex, s0, s1); the own vertex's from the same
         // rounded sum as the test, so that it is never negative
         let sum = u.x + u.y;
-        let (f, w) = if sum <= 1.0 {
-            (0, [1.0 - sum, u.x, u.y])
-        } else {
-            (1, [sum - 1.0, 1.0 - u.y, 1.0 - u.x])
-        };
+        // without a branch: the two halves are equally likely, so a jump
+        // would be mispredicted on every other light sample
+        let second = sum > 1.0;
+        let f = second as usize;
+        let w = [
+            if second { sum - 1.0 } else { 1.0 - sum },
+            if second { 1.0 - u.y } else { u.x },
+            if second { 1.0 - u.x } else { u.y },
+        ];
         let mut b = [0.0; 3];
         for (slot, w) in self.slots[f].into_iter().zip(w) {
             b[slot] = w;
