@@ -3,7 +3,7 @@
 
 use super::{mis_weight, scatter, Budgets};
 use crate::ad::Real;
-use crate::bsdf::{BsdfContextT, BsdfFlags, BsdfT};
+use crate::bsdf::{BsdfContextT, BsdfFlags};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::math::Spectrum;
@@ -105,7 +105,7 @@ impl DirectIntegrator {
         // its textures read once for all the samples below
         let bsdf_ctx = bsdf.context(store, &si);
         let (ne, nb) = (self.emitter_samples as f32, self.bsdf_samples as f32);
-        if bsdf.flags().has(BsdfFlags::SMOOTH) {
+        if scene.shape_bsdf_flags(hit.shape).has(BsdfFlags::SMOOTH) {
             for _ in 0..self.emitter_samples {
                 let u = rng.next_2d();
                 if let Some(es) = scene.sample_emitter::<R>(store, si.p, u) {

@@ -6,7 +6,7 @@
 
 use super::{mis_weight, roulette, scatter, Budgets};
 use crate::ad::Real;
-use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
+use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags};
 use crate::emitter::EmitterT;
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit};
@@ -160,7 +160,7 @@ impl PathIntegrator {
 
             // next-event estimation
             let u_light = rng.next_2d();
-            if bsdf.flags().has(BsdfFlags::SMOOTH) {
+            if scene.shape_bsdf_flags(h.shape).has(BsdfFlags::SMOOTH) {
                 if let Some(es) = scene.sample_emitter::<R>(store, si.p, u_light) {
                     let wo = si.to_local(es.d);
                     let f = bsdf_ctx.eval(wo);

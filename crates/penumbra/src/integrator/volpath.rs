@@ -29,7 +29,7 @@
 
 use super::{mis_weight, survives_roulette, Budgets};
 use crate::ad::Real;
-use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags, BsdfT};
+use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags};
 use crate::emitter::{DirectionSample, EmitterSample, EmitterT};
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, Ray, SurfaceInteraction, SurfacePoint};
@@ -231,12 +231,12 @@ impl VolPathIntegrator {
             // through a thin dielectric or a mask still reaches what lies
             // behind it.
             let last_bounce = depth + 1 >= self.max_depth;
-            if last_bounce && !bsdf.flags().has(BsdfFlags::NULL) {
+            if last_bounce && !scene.shape_bsdf_flags(h.shape).has(BsdfFlags::NULL) {
                 return result;
             }
             bsdf_ctx.set(bsdf, store, &si);
 
-            if !last_bounce && bsdf.flags().has(BsdfFlags::SMOOTH) {
+            if !last_bounce && scene.shape_bsdf_flags(h.shape).has(BsdfFlags::SMOOTH) {
                 let u = rng.next_2d();
                 let from = Vertex::Surface(&h, &si);
                 if let Some((es, tr)) = self.sample_emitter(scene, store, from, medium, u, rng) {
@@ -331,7 +331,7 @@ impl VolPathIntegrator {
             // through with that lobe's weight, as Mitsuba's volpath does;
             // the others stop it
             let bsdf = scene.shape_bsdf(h.shape);
-            if !bsdf.flags().has(BsdfFlags::NULL) {
+            if !scene.shape_bsdf_flags(h.shape).has(BsdfFlags::NULL) {
                 return None;
             }
             let sp = if matches!(bsdf, Bsdf::Null(_)) {

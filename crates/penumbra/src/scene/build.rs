@@ -3,7 +3,7 @@
 //! to their BSDFs and area emitters, and builds the acceleration structure.
 
 use super::{Class, LoadContext, Node, Prop, Scene, SceneDescription, ShapeInfo, Value};
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, BsdfT};
 use crate::emitter::{Emitter, EmitterT};
 use crate::error::Result;
 use crate::geometry::accel::Accel;
@@ -321,6 +321,7 @@ impl Builder {
         self.shape_info.push(ShapeInfo {
             key: node.key.clone(),
             bsdf,
+            bsdf_flags: self.bsdfs[bsdf as usize].flags(),
             emitter,
             interior,
             exterior,

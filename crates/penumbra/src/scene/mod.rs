@@ -16,7 +16,7 @@ use crate::params::{ParamStore, ParamView};
 mod build;
 
 use crate::ad::Real;
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, BsdfFlags};
 use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
 use crate::geometry::{
@@ -46,6 +46,10 @@ pub struct ShapeInfo {
     /// Parameter-key prefix (the shape's id).
     pub key: String,
     pub bsdf: u32,
+    /// The flags of [`ShapeInfo::bsdf`] (they follow from the BSDF's
+    /// plugins, not from its parameters): read at every vertex, where
+    /// asking the BSDF walks its wrappers.
+    pub bsdf_flags: BsdfFlags,
     pub emitter: Option<u32>,
     /// The media inside and outside the shape (indices into
     /// [`Scene::media`]); outside is the side the normal points to.
@@ -234,6 +238,11 @@ impl Scene {
     #[inline]
     pub fn shape_bsdf(&self, shape: u32) -> &Bsdf {
         &self.bsdfs[self.shape_info[shape as usize].bsdf as usize]
+    }
+
+    #[inline]
+    pub fn shape_bsdf_flags(&self, shape: u32) -> BsdfFlags {
+        self.shape_info[shape as usize].bsdf_flags
     }
 
     #[inline]
