@@ -231,12 +231,13 @@ impl VolPathIntegrator {
             // through a thin dielectric or a mask still reaches what lies
             // behind it.
             let last_bounce = depth + 1 >= self.max_depth;
-            if last_bounce && !scene.shape_bsdf_flags(h.shape).has(BsdfFlags::NULL) {
+            let flags = scene.shape_bsdf_flags(h.shape);
+            if last_bounce && !flags.has(BsdfFlags::NULL) {
                 return result;
             }
             bsdf_ctx.set(bsdf, store, &si);
 
-            if !last_bounce && scene.shape_bsdf_flags(h.shape).has(BsdfFlags::SMOOTH) {
+            if !last_bounce && flags.has(BsdfFlags::SMOOTH) {
                 let u = rng.next_2d();
                 let from = Vertex::Surface(&h, &si);
                 if let Some((es, tr)) = self.sample_emitter(scene, store, from, medium, u, rng) {
