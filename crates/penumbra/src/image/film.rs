@@ -133,6 +133,19 @@ impl ImageBlock {
         py: f32,
         mut f: impl FnMut(i64, i64, f64),
     ) {
+        if let ReconstructionFilter::Box = filter {
+            // A sample strictly inside pixel (i, j) reaches that pixel only
+            // (|k + 0.5 − c| ≤ 0.5 holds for k = ⌊c⌋ alone when c is not
+            // an integer): no footprint, no loops. A sample on a pixel
+            // border (or NaN) takes the general test below.
+            let (i, j) = (px as i64, py as i64);
+            if (i as f32) < px && (j as f32) < py {
+                if (x0..x0 + width).contains(&i) && (y0..y0 + height).contains(&j) {
+                    f(i, j, 1.0);
+                }
+                return;
+            }
+        }
         let r = filter.radius();
         // pixels whose centre (i + 0.5) is within r of px
         let i0 = ceil_i64(px - 0.5 - r).max(x0);
