@@ -843,9 +843,9 @@ impl ShapeT for Mesh {
 struct QuadSampling {
     /// The two faces.
     faces: [usize; 2],
-    /// Per face: the positions, in the face's index list, of its own
-    /// vertex and of the shared vertices s0 and s1 (in that order).
-    slots: [[usize; 3]; 2],
+    /// Per face: which of the weights (own vertex, s0, s1) belong to the
+    /// face's second and third vertex (its barycentrics b1, b2).
+    picks: [[usize; 2]; 2],
 }
 
 impl QuadSampling {
@@ -868,14 +868,23 @@ impl QuadSampling {
         let &[s0, s1] = shared.as_slice() else {
             return None;
         };
-        let slots = |f: [u32; 3]| {
-            let at = |v: u32| f.iter().position(|&w| w == v);
-            let own = f.iter().position(|&w| w != s0 && w != s1)?;
-            Some([own, at(s0)?, at(s1)?])
+        let picks = |f: [u32; 3]| {
+            // the weight of each of the face's vertices: 0 for its own, 1
+            // and 2 for the shared s0 and s1
+            let weight_of = |v: u32| {
+                if v == s0 {
+                    1
+                } else if v == s1 {
+                    2
+                } else {
+                    0
+                }
+            };
+            [weight_of(f[1]), weight_of(f[2])]
         };
         Some(QuadSampling {
             faces: [i0, i1],
-            slots: [slots(f0)?, slots(f1)?],
+            picks: [picks(f0), picks(f1)],
         })
     }
 
@@ -895,11 +904,12 @@ impl QuadSampling {
             if second { 1.0 - u.y } else { u.x },
             if second { 1.0 - u.x } else { u.y },
         ];
-        let mut b = [0.0; 3];
-        for (slot, w) in self.slots[f].into_iter().zip(w) {
-            b[slot] = w;
-        }
-        (self.faces[f], Vec2::new(b[1], b[2]))
+        // read, not scattered into place: three stores at computed indices
+        // and one wide load of two of them defeated the processor's
+        // store-to-load forwarding (a stall of ~13 % of the light sample
+        // on cbox, docs/perf/render_loop.md)
+        let [k1, k2] = self.picks[f];
+        (self.faces[f], Vec2::new(w[k1], w[k2]))
     }
 }
 
