@@ -224,7 +224,7 @@ impl Integrator {
                     scene,
                     &store,
                     DiffRay::cst(ray),
-                    scene.intersect(ray),
+                    scene.intersect(ray).as_ref(),
                     1,
                     rng,
                 )

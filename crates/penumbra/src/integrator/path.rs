@@ -64,7 +64,7 @@ impl PathIntegrator {
         let camera_ray = cs.ray_if_moving::<R>(store);
         let hit = scene.intersect(&camera_ray.val());
         (
-            self.trace(scene, store, camera_ray, hit, 0, rng),
+            self.trace(scene, store, camera_ray, hit.as_ref(), 0, rng),
             hit.is_some(),
         )
     }
@@ -80,7 +80,7 @@ impl PathIntegrator {
         scene: &Scene,
         store: &ParamView,
         camera_ray: DiffRay<R>,
-        mut hit: Option<Hit>,
+        hit: Option<&Hit>,
         mut depth: u32,
         rng: &mut SampleStream,
     ) -> Spectrum<R> {
@@ -102,7 +102,7 @@ impl PathIntegrator {
         // assigned into its slot: built inside an array literal, the
         // first vertex was copied into place, a copy that waits on the
         // stores just made (docs/perf/render_loop.md)
-        if let Some(h) = &hit {
+        if let Some(h) = hit {
             slots[0] = Some(scene.surface_interaction::<R>(store, &camera_ray, h));
         }
         let mut current = 0;
@@ -112,7 +112,11 @@ impl PathIntegrator {
         loop {
             let [a, b] = &mut slots;
             let (vertex, next) = if current == 0 { (a, b) } else { (b, a) };
-            let (Some(h), Some(si)) = (hit, vertex.as_ref()) else {
+            // a vertex where the ray reached a surface (its shape is the
+            // hit's); the hit itself is not kept from bounce to bounce: a
+            // copy of it read back whole, right after the traversal wrote
+            // it field by field, waited for the stores (docs/perf/render_loop.md)
+            let Some(si) = vertex.as_ref() else {
                 // escaped: environment emission
                 if let Some(env) = scene.environment {
                     if !(self.hide_emitters && depth == 0) {
@@ -131,7 +135,7 @@ impl PathIntegrator {
             };
 
             // emission of a surface hit by the previous BSDF sample
-            if let Some(em) = scene.shape_emitter(h.shape) {
+            if let Some(em) = scene.shape_emitter(si.shape) {
                 if !(self.hide_emitters && depth == 0) {
                     let le = scene.emitters[em as usize].eval_surface(store, si);
                     if !le.is_zero() {
@@ -155,12 +159,12 @@ impl PathIntegrator {
             if depth + 1 >= self.max_depth {
                 return result;
             }
-            let bsdf = scene.shape_bsdf(h.shape);
+            let bsdf = scene.shape_bsdf(si.shape);
             bsdf_ctx.set(bsdf, store, si);
 
             // next-event estimation
             let u_light = rng.next_2d();
-            if scene.shape_bsdf_flags(h.shape).has(BsdfFlags::SMOOTH) {
+            if scene.shape_bsdf_flags(si.shape).has(BsdfFlags::SMOOTH) {
                 if let Some(es) = scene.sample_emitter::<R>(store, si.p, u_light) {
                     let wo = si.to_local(es.d);
                     let f = bsdf_ctx.eval(wo);
@@ -204,7 +208,6 @@ impl PathIntegrator {
             ray = bounce.ray;
             ray_d = bounce.d;
             prev_p = si.p.val();
-            hit = bounce.hit;
             current = 1 - current;
             prev_pdf = bs.pdf;
             prev_delta = bounce.delta;
