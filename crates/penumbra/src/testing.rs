@@ -277,15 +277,19 @@ mod tests {
     fn accepts_a_correct_sampler_and_rejects_a_wrong_one() {
         let t = Chi2Test::default();
         let ok = t.run(
-            |r| Some(warp::square_to_cosine_hemisphere(r.next_2d())),
-            warp::square_to_cosine_hemisphere_pdf,
+            |r| {
+                Some(Vec3::from(warp::square_to_cosine_hemisphere(
+                    r.next_2d().into(),
+                )))
+            },
+            |v| warp::square_to_cosine_hemisphere_pdf(v.into()),
         );
         assert!(ok.p_value > 0.01, "{ok:?}");
         assert!((ok.pdf_integral - 1.0).abs() < 1e-3);
         // uniform hemisphere samples tested against the cosine density
         let bad = t.run(
             |r| Some(warp::square_to_uniform_hemisphere(r.next_2d())),
-            warp::square_to_cosine_hemisphere_pdf,
+            |v| warp::square_to_cosine_hemisphere_pdf(v.into()),
         );
         assert!(bad.p_value < 1e-6, "{bad:?}");
     }

@@ -1,7 +1,7 @@
 //! Forward-mode dual numbers: a value and its derivative along one tangent
 //! direction of the parameter space.
 
-use super::{weighted_sum, Real};
+use super::{weighted_sum, Real, ScalarReal};
 use crate::params::{ParamId, ParamView};
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -25,15 +25,7 @@ impl Dual {
     }
 }
 
-impl Real for Dual {
-    #[inline(always)]
-    fn cst(v: f32) -> Self {
-        Dual::new(v, 0.0)
-    }
-    #[inline(always)]
-    fn val(self) -> f32 {
-        self.v
-    }
+impl ScalarReal for Dual {
     #[inline(always)]
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         Dual::new(store.value(id, index), store.tangent(id, index))
@@ -43,6 +35,31 @@ impl Real for Dual {
         // the sums a product and a sum per element would make, bit for bit
         let d = store.tangents(id).map_or(0.0, |t| weighted_sum(t, terms));
         Dual::new(weighted_sum(store.data(id), terms), d)
+    }
+}
+
+impl Real for Dual {
+    type Prim = f32;
+    type Mask = bool;
+    #[inline(always)]
+    fn cst(v: f32) -> Self {
+        Dual::new(v, 0.0)
+    }
+    #[inline(always)]
+    fn from_prim(p: f32) -> Self {
+        Self::cst(p)
+    }
+    #[inline(always)]
+    fn val(self) -> f32 {
+        self.v
+    }
+    #[inline(always)]
+    fn select(m: bool, a: Self, b: Self) -> Self {
+        if m {
+            a
+        } else {
+            b
+        }
     }
     fn tracks(store: &ParamView, id: ParamId) -> bool {
         store.has_tangent(id)

@@ -10,7 +10,7 @@
 //! parameter gradients, and clears the tape: memory stays independent of
 //! the sample count, and holds one path's dependent operations.
 
-use super::{weighted_sum, Real};
+use super::{weighted_sum, Real, ScalarReal};
 use crate::params::{ParamId, ParamView};
 use std::cell::RefCell;
 use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -200,22 +200,7 @@ pub fn backward(outputs: &[(Var, f32)], mut scatter: impl FnMut(ParamId, usize, 
     });
 }
 
-impl Real for Var {
-    #[inline(always)]
-    fn cst(v: f32) -> Self {
-        Var { v, node: CONST }
-    }
-    #[inline(always)]
-    fn val(self) -> f32 {
-        self.v
-    }
-    fn tracks(store: &ParamView, id: ParamId) -> bool {
-        store.is_recorded(id)
-    }
-    #[inline(always)]
-    fn is_const(self) -> bool {
-        self.node == CONST
-    }
+impl ScalarReal for Var {
     fn from_param(store: &ParamView, id: ParamId, index: usize) -> Self {
         let v = store.value(id, index);
         if !store.is_recorded(id) {
@@ -230,6 +215,47 @@ impl Real for Var {
             return Var::cst(v);
         }
         Var::param_leaf(v, id, terms)
+    }
+}
+
+impl Real for Var {
+    type Prim = f32;
+    type Mask = bool;
+    #[inline(always)]
+    fn cst(v: f32) -> Self {
+        Var { v, node: CONST }
+    }
+    #[inline(always)]
+    fn from_prim(p: f32) -> Self {
+        Self::cst(p)
+    }
+    #[inline(always)]
+    fn val(self) -> f32 {
+        self.v
+    }
+    #[inline(always)]
+    fn select(m: bool, a: Self, b: Self) -> Self {
+        if m {
+            a
+        } else {
+            b
+        }
+    }
+    fn tracks(store: &ParamView, id: ParamId) -> bool {
+        store.is_recorded(id)
+    }
+    #[inline(always)]
+    fn is_const(self) -> bool {
+        self.node == CONST
+    }
+    /// A branch rather than the default's select: the square root of a
+    /// negative value would record a tape node nothing reads.
+    fn safe_sqrt(self) -> Self {
+        if self.v > 0.0 {
+            self.sqrt()
+        } else {
+            Var::cst(0.0)
+        }
     }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();
@@ -396,7 +422,7 @@ mod tests {
     /// and reverse mode (all inputs at once) gives the same gradient.
     #[test]
     fn reverse_gradient_equals_forward_derivatives() {
-        fn f<R: Real>(s: &ParamView, id: ParamId) -> R {
+        fn f<R: ScalarReal>(s: &ParamView, id: ParamId) -> R {
             let (a, b, c): (R, R, R) = (s.read(id, 0), s.read(id, 1), s.read(id, 2));
             ((a * b).sin() + c.sqrt() * a.exp() - b / (c + 1.0)).powf(1.5) + a.atan2(c) * b.acos()
         }
@@ -511,7 +537,7 @@ mod tests {
             )
             .unwrap();
         let terms = [(1, 0.25), (3, 0.0), (4, 0.6), (0, 0.15), (1, 0.3)];
-        fn generic<R: Real>(s: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> R {
+        fn generic<R: ScalarReal>(s: &ParamView, id: ParamId, terms: &[(usize, f32)]) -> R {
             let mut v = R::cst(0.0);
             for &(i, w) in terms {
                 if w != 0.0 {

@@ -4,7 +4,7 @@ use super::{
     chosen_with, nested_bsdfs, reuse_uniform, smooth_sample, Bsdf, BsdfContextT, BsdfFlags,
     BsdfSample, BsdfT, NestedContext, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -52,7 +52,7 @@ impl BlendBsdf {
         }
     }
 
-    fn w<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn w<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         self.weight.eval_1(store, si).clamp(0.0, 1.0)
     }
 }
@@ -66,7 +66,7 @@ impl BsdfT for BlendBsdf {
         1 + self.bsdfs[0].context_len() + self.bsdfs[1].context_len()
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -88,13 +88,13 @@ impl BsdfT for BlendBsdf {
 ///
 /// [`BsdfContext`]: super::BsdfContext
 #[derive(Clone, Copy, Debug)]
-pub struct BlendBsdfContext<R: Real> {
+pub struct BlendBsdfContext<R: ScalarReal> {
     weight: R,
     /// Where the second nested BSDF's context is, relative to this one's.
     second: usize,
 }
 
-impl<R: Real> BlendBsdfContext<R> {
+impl<R: ScalarReal> BlendBsdfContext<R> {
     fn nested<'c, 'a>(&self, this: NestedContext<'c, 'a, R>) -> [NestedContext<'c, 'a, R>; 2] {
         [this.at(1), this.at(self.second)]
     }

@@ -3,7 +3,7 @@
 
 use super::normalmap::{write_perturbed, Perturbation};
 use super::{nested_bsdfs, rekey, scalar_param, Bsdf, BsdfFlags, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
@@ -97,7 +97,7 @@ impl BsdfT for BumpMap {
     /// ∂p/∂u + (∂h/∂u) n and ∂p/∂v + (∂h/∂v) n with their components along
     /// the shading normal n replaced by the height gradient (as Mitsuba
     /// does), oriented to the geometric normal's side.
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,

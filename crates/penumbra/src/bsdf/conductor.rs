@@ -3,7 +3,7 @@
 
 use super::fresnel::{fresnel_conductor, lookup_conductor, CONDUCTOR_TABLE};
 use super::{default_albedo, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -70,7 +70,7 @@ impl ConductorIor {
     }
 
     /// The index at `si`.
-    pub fn eval<R: Real>(
+    pub fn eval<R: ScalarReal>(
         &self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -84,12 +84,12 @@ impl ConductorIor {
 
 /// A [`ConductorIor`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct ConductorIorValue<R: Real> {
+pub struct ConductorIorValue<R: ScalarReal> {
     eta: Spectrum<R>,
     k: Spectrum<R>,
 }
 
-impl<R: Real> ConductorIorValue<R> {
+impl<R: ScalarReal> ConductorIorValue<R> {
     /// Fresnel reflectance for incident cosine `cos_i`.
     pub fn fresnel(&self, cos_i: R) -> Spectrum<R> {
         fresnel_conductor(cos_i, self.eta, self.k)
@@ -127,7 +127,7 @@ impl BsdfT for Conductor {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DELTA_REFLECTION
     }
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -144,13 +144,13 @@ impl BsdfT for Conductor {
 
 /// [`Conductor`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct ConductorContext<R: Real> {
+pub struct ConductorContext<R: ScalarReal> {
     wi: V3<R>,
     ior: ConductorIorValue<R>,
     specular_reflectance: Spectrum<R>,
 }
 
-impl<R: Real> BsdfContextT<R> for ConductorContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for ConductorContext<R> {
     fn eval(&self, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }

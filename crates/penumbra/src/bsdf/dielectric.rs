@@ -6,7 +6,7 @@ use super::{
     default_albedo, eta_props, eval_factor, sample_reflect_or_transmit, scalar_param,
     specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -56,7 +56,7 @@ impl BsdfT for Dielectric {
             .union(BsdfFlags::DELTA_TRANSMISSION)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -74,14 +74,14 @@ impl BsdfT for Dielectric {
 
 /// [`Dielectric`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct DielectricContext<R: Real> {
+pub struct DielectricContext<R: ScalarReal> {
     wi: V3<R>,
     eta: R,
     specular_reflectance: Option<Spectrum<R>>,
     specular_transmittance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for DielectricContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for DielectricContext<R> {
     fn eval(&self, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }

@@ -1,7 +1,7 @@
 //! `diffuse`: the ideal Lambertian reflector.
 
 use super::{BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
@@ -38,7 +38,7 @@ impl BsdfT for Diffuse {
         BsdfFlags::DIFFUSE_REFLECTION
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -54,12 +54,12 @@ impl BsdfT for Diffuse {
 
 /// [`Diffuse`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct DiffuseContext<R: Real> {
+pub struct DiffuseContext<R: ScalarReal> {
     wi: V3<R>,
     reflectance: Spectrum<R>,
 }
 
-impl<R: Real> BsdfContextT<R> for DiffuseContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for DiffuseContext<R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         if !(self.wi.z.val() > 0.0 && wo.z.val() > 0.0) {
             return V3::zero();
@@ -71,15 +71,15 @@ impl<R: Real> BsdfContextT<R> for DiffuseContext<R> {
         if !(self.wi.z.val() > 0.0) {
             return 0.0;
         }
-        warp::square_to_cosine_hemisphere_pdf(wo)
+        warp::square_to_cosine_hemisphere_pdf(wo.into())
     }
 
     fn sample(&self, _u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
         if !(self.wi.z.val() > 0.0) {
             return None;
         }
-        let wo = warp::square_to_cosine_hemisphere(u2);
-        let pdf = warp::square_to_cosine_hemisphere_pdf(wo);
+        let wo = Vec3::from(warp::square_to_cosine_hemisphere(u2.into()));
+        let pdf = warp::square_to_cosine_hemisphere_pdf(wo.into());
         if !(pdf > 0.0) {
             return None;
         }

@@ -2,7 +2,7 @@
 //! diffuse Fresnel reflectance, and the named indices of refraction that
 //! Mitsuba 3 accepts for `int_ior` / `ext_ior`.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::math::{Spectrum, V3};
 use glam::Vec3;
 
@@ -15,7 +15,7 @@ use glam::Vec3;
 /// 0 under total internal reflection), and the relative indices of
 /// refraction along the incident → transmitted path and back.
 #[inline]
-pub fn fresnel_dielectric<R: Real>(cos_theta_i: R, eta: R) -> (R, R, R, R) {
+pub fn fresnel_dielectric<R: ScalarReal>(cos_theta_i: R, eta: R) -> (R, R, R, R) {
     let outside = cos_theta_i.val() >= 0.0;
     let (eta_it, eta_ti) = if outside {
         (eta, eta.recip())
@@ -44,7 +44,7 @@ pub fn fresnel_dielectric<R: Real>(cos_theta_i: R, eta: R) -> (R, R, R, R) {
 /// refraction `eta + i k` (relative to the outside medium), for one colour
 /// channel; exact formula (e.g. pbrt-v3 §8.2.1, `FrConductor`).
 #[inline]
-pub fn fresnel_conductor_1<R: Real>(cos_theta_i: R, eta: R, k: R) -> R {
+pub fn fresnel_conductor_1<R: ScalarReal>(cos_theta_i: R, eta: R, k: R) -> R {
     let c2 = cos_theta_i * cos_theta_i;
     let s2 = -c2 + 1.0;
     let s4 = s2 * s2;
@@ -62,7 +62,11 @@ pub fn fresnel_conductor_1<R: Real>(cos_theta_i: R, eta: R, k: R) -> R {
 
 /// [`fresnel_conductor_1`] for each RGB channel.
 #[inline]
-pub fn fresnel_conductor<R: Real>(cos_theta_i: R, eta: Spectrum<R>, k: Spectrum<R>) -> Spectrum<R> {
+pub fn fresnel_conductor<R: ScalarReal>(
+    cos_theta_i: R,
+    eta: Spectrum<R>,
+    k: Spectrum<R>,
+) -> Spectrum<R> {
     V3::new(
         fresnel_conductor_1(cos_theta_i, eta.x, k.x),
         fresnel_conductor_1(cos_theta_i, eta.y, k.y),
@@ -74,7 +78,7 @@ pub fn fresnel_conductor<R: Real>(cos_theta_i: R, eta: Spectrum<R>, k: Spectrum<
 /// `∫ F(cos θ) 2 cos θ dcos θ`, by the fits Mitsuba 3 uses: Egan and
 /// Hilgeman 1973 for `eta < 1`, d'Eon and Irving 2011 ("A quantized-diffusion
 /// model for rendering translucent materials") otherwise.
-pub fn fresnel_diffuse_reflectance<R: Real>(eta: R) -> R {
+pub fn fresnel_diffuse_reflectance<R: ScalarReal>(eta: R) -> R {
     if eta.val() < 1.0 {
         eta * eta * -1.4399 + eta * 0.7099 + 0.6681 + eta.recip() * 0.0636
     } else {
@@ -89,13 +93,13 @@ pub fn fresnel_diffuse_reflectance<R: Real>(eta: R) -> R {
 /// `eta_ti` from [`fresnel_dielectric`] (evaluated at `dot(wi, m)`).
 /// Generic so that delta refraction moves with an attached `wi`.
 #[inline]
-pub fn refract<R: Real>(wi: V3<R>, m: V3<R>, cos_theta_t: R, eta_ti: R) -> V3<R> {
+pub fn refract<R: ScalarReal>(wi: V3<R>, m: V3<R>, cos_theta_t: R, eta_ti: R) -> V3<R> {
     m * (wi.dot(m) * eta_ti + cos_theta_t) - wi * eta_ti
 }
 
 /// Mirror reflection of `wi` about `m`.
 #[inline]
-pub fn reflect<R: Real>(wi: V3<R>, m: V3<R>) -> V3<R> {
+pub fn reflect<R: ScalarReal>(wi: V3<R>, m: V3<R>) -> V3<R> {
     m * (wi.dot(m) * 2.0) - wi
 }
 

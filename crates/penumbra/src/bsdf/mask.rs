@@ -5,7 +5,7 @@ use super::{
     chosen_with, nested_bsdfs, reuse_uniform, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT,
     NestedContext, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -42,7 +42,7 @@ impl Mask {
         self.nested.parameters_changed(store);
     }
 
-    fn o<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn o<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         self.opacity.eval_1(store, si).clamp(0.0, 1.0)
     }
 }
@@ -59,7 +59,7 @@ impl BsdfT for Mask {
         1 + self.nested.context_len()
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -78,12 +78,12 @@ impl BsdfT for Mask {
 ///
 /// [`BsdfContext`]: super::BsdfContext
 #[derive(Clone, Copy, Debug)]
-pub struct MaskContext<R: Real> {
+pub struct MaskContext<R: ScalarReal> {
     wi: V3<R>,
     opacity: R,
 }
 
-impl<R: Real> MaskContext<R> {
+impl<R: ScalarReal> MaskContext<R> {
     pub(crate) fn eval(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
         this.at(1).eval(wo) * self.opacity
     }

@@ -11,7 +11,7 @@
 //! alpha_v)` along the shading frame's tangents, Walter et al.'s rational
 //! fit for the Beckmann `G1`, and `G = G1(wi) G1(wo)`.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, V3};
@@ -46,7 +46,7 @@ pub struct MicrofacetDistribution<R> {
 /// almost smooth one instead of dividing by zero.
 pub const MIN_ALPHA: f32 = 1e-4;
 
-impl<R: Real> MicrofacetDistribution<R> {
+impl<R: ScalarReal> MicrofacetDistribution<R> {
     /// The distribution of roughness (`alpha_u`, `alpha_v`), each clamped
     /// to at least [`MIN_ALPHA`] (below it the derivative is zero).
     pub fn new(kind: MicrofacetType, alpha_u: R, alpha_v: R, sample_visible: bool) -> Self {
@@ -383,7 +383,7 @@ impl Roughness {
     }
 
     /// The distribution at surface point `si`, roughness read as `R`.
-    pub fn distribution<R: Real>(
+    pub fn distribution<R: ScalarReal>(
         &self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,

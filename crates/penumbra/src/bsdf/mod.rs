@@ -49,7 +49,7 @@ pub use roughplastic::{RoughPlastic, RoughPlasticContext};
 pub use thindielectric::{ThinDielectric, ThinDielectricContext};
 pub use twosided::{TwoSided, TwoSidedContext};
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -109,7 +109,7 @@ pub struct BsdfSample<R> {
     pub lobe: BsdfFlags,
 }
 
-impl<R: Real> BsdfSample<R> {
+impl<R: ScalarReal> BsdfSample<R> {
     /// A delta reflection about the normal (`wo` = `wi` mirrored, `eta`
     /// 1) chosen with probability `pdf`.
     pub(crate) fn specular_reflection(wi: V3<R>, pdf: f32, weight: Spectrum<R>) -> Self {
@@ -148,7 +148,7 @@ pub trait BsdfT {
     /// and writes its context to `nodes[0]`; a wrapper writes those of the
     /// nested BSDFs it uses at `si` after its own (pre-order). Returns how
     /// many nodes it wrote.
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -160,7 +160,7 @@ pub trait BsdfT {
 /// Conventions as in the module documentation: `wi` is the vertex's
 /// incident direction; `eval` is `f(wi, wo) · |cos θo|` for the smooth
 /// lobes (zero for delta lobes), differentiable in `wi` and `wo`.
-pub trait BsdfContextT<R: Real> {
+pub trait BsdfContextT<R: ScalarReal> {
     /// `f(wi, wo) · |cos θo|` for the smooth lobes.
     fn eval(&self, wo: V3<R>) -> Spectrum<R>;
     /// Solid-angle density with which `sample` returns `wo` (smooth lobes).
@@ -183,7 +183,7 @@ pub trait BsdfContextT<R: Real> {
 /// The context of one BSDF node at a vertex (mirrors [`Bsdf`]): its
 /// texture values in `R` and what else its methods read.
 #[derive(Clone, Copy, Debug)]
-pub enum NodeContext<'a, R: Real> {
+pub enum NodeContext<'a, R: ScalarReal> {
     Diffuse(DiffuseContext<R>),
     Conductor(ConductorContext<R>),
     RoughConductor(RoughConductorContext<R>),
@@ -219,13 +219,13 @@ pub const MAX_CONTEXT_NODES: usize = 8;
 /// densities, the evaluation for emitter samples and the re-evaluation
 /// along a scattered path.
 #[derive(Clone, Copy, Debug)]
-pub struct BsdfContext<'a, R: Real> {
+pub struct BsdfContext<'a, R: ScalarReal> {
     /// The nodes in pre-order (a wrapper, then its nested BSDFs' nodes),
     /// `None` past the last.
     nodes: [Option<NodeContext<'a, R>>; MAX_CONTEXT_NODES],
 }
 
-impl<'a, R: Real> BsdfContext<'a, R> {
+impl<'a, R: ScalarReal> BsdfContext<'a, R> {
     /// Storage for [`set`](Self::set): a context of no BSDF yet (using it
     /// panics).
     pub fn empty() -> Self {
@@ -246,7 +246,7 @@ impl<'a, R: Real> BsdfContext<'a, R> {
     }
 }
 
-impl<R: Real> BsdfContextT<R> for BsdfContext<'_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for BsdfContext<'_, R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         self.root().eval(wo)
     }
@@ -267,11 +267,11 @@ impl<R: Real> BsdfContextT<R> for BsdfContext<'_, R> {
 /// One node of a [`BsdfContext`] and the nodes after it, which begin with
 /// those of its nested BSDFs: how a wrapper reaches its nested contexts.
 #[derive(Clone, Copy, Debug)]
-pub struct NestedContext<'c, 'a, R: Real> {
+pub struct NestedContext<'c, 'a, R: ScalarReal> {
     nodes: &'c [Option<NodeContext<'a, R>>],
 }
 
-impl<'c, 'a, R: Real> NestedContext<'c, 'a, R> {
+impl<'c, 'a, R: ScalarReal> NestedContext<'c, 'a, R> {
     /// The node `offset` places after this one (a wrapper's first nested
     /// BSDF is at 1).
     pub(crate) fn at(self, offset: usize) -> Self {
@@ -312,7 +312,7 @@ macro_rules! dispatch_context {
     };
 }
 
-impl<R: Real> BsdfContextT<R> for NestedContext<'_, '_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for NestedContext<'_, '_, R> {
     #[inline]
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         dispatch_context!(*self, eval(wo))
@@ -417,7 +417,7 @@ impl BsdfT for Bsdf {
         dispatch!(self, b => b.context_len())
     }
     #[inline]
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -476,7 +476,7 @@ impl Bsdf {
 
     /// The BSDF at the surface vertex `si` (see [`BsdfContext`]): build it
     /// once per vertex and use it for everything the BSDF does there.
-    pub fn context<'a, R: Real>(
+    pub fn context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -536,7 +536,7 @@ pub(crate) fn specular_factors(
 
 /// An optional specular factor's value at `si` (`None` when the factor
 /// was not given).
-pub(crate) fn eval_factor<R: Real>(
+pub(crate) fn eval_factor<R: ScalarReal>(
     factor: &Option<Texture>,
     store: &ParamView,
     si: &SurfaceInteraction<R>,
@@ -546,7 +546,10 @@ pub(crate) fn eval_factor<R: Real>(
 
 /// `value` times the optional specular factor's value (unchanged when the
 /// factor was not given).
-pub(crate) fn modulate<R: Real>(value: Spectrum<R>, factor: Option<Spectrum<R>>) -> Spectrum<R> {
+pub(crate) fn modulate<R: ScalarReal>(
+    value: Spectrum<R>,
+    factor: Option<Spectrum<R>>,
+) -> Spectrum<R> {
     match factor {
         Some(t) => value.mul_elem(t),
         None => value,
@@ -667,7 +670,7 @@ pub(crate) fn rekey(node: &Node, key: &str) -> Node {
 /// random) and its weight `eval(wo) / pdf`; `None` where the density is 0.
 /// `wo` enters as a constant: a sampled direction is a variable of
 /// integration, not a function of the parameters.
-pub(crate) fn smooth_sample<R: Real>(
+pub(crate) fn smooth_sample<R: ScalarReal>(
     b: &impl BsdfContextT<R>,
     wo: Vec3,
     eta: f32,
@@ -699,7 +702,7 @@ pub(crate) type Transmitted<R> = (V3<R>, R, f32, BsdfFlags);
 /// reflected weight is `F / F` times `specular_reflectance`, the
 /// transmitted one `value / (1 − F)` times `specular_transmittance`.
 /// `None` when the transmission was chosen but has probability 0.
-pub(crate) fn sample_reflect_or_transmit<R: Real>(
+pub(crate) fn sample_reflect_or_transmit<R: ScalarReal>(
     wi: V3<R>,
     f: R,
     specular_reflectance: Option<Spectrum<R>>,
@@ -736,7 +739,11 @@ pub(crate) fn reuse_uniform(u: f32, start: f32, width: f32) -> f32 {
 /// A component's sample scaled by the probability `prob` (primal) /
 /// `prob_r` (differentiable) with which the component was chosen: the
 /// density times `prob`, the weight times `prob_r / prob`.
-pub(crate) fn chosen_with<R: Real>(mut bs: BsdfSample<R>, prob: f32, prob_r: R) -> BsdfSample<R> {
+pub(crate) fn chosen_with<R: ScalarReal>(
+    mut bs: BsdfSample<R>,
+    prob: f32,
+    prob_r: R,
+) -> BsdfSample<R> {
     bs.pdf *= prob;
     bs.weight *= prob_r / prob;
     bs
@@ -744,7 +751,7 @@ pub(crate) fn chosen_with<R: Real>(mut bs: BsdfSample<R>, prob: f32, prob_r: R) 
 
 /// Mitsuba's default `eval_diffuse_reflectance`: `π f(wi, +z) cos`, used
 /// as the albedo of BSDFs without a diffuse colour.
-pub(crate) fn default_albedo<R: Real>(b: &impl BsdfContextT<R>) -> Spectrum<R> {
+pub(crate) fn default_albedo<R: ScalarReal>(b: &impl BsdfContextT<R>) -> Spectrum<R> {
     b.eval(V3::cst(Vec3::Z)).scale(std::f32::consts::PI)
 }
 

@@ -7,7 +7,7 @@ use super::{
     nested_bsdfs, smooth_sample, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NestedContext,
     NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Frame, Spectrum, V3};
@@ -88,7 +88,7 @@ impl BsdfT for NormalMap {
         1 + self.nested.context_len()
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -104,7 +104,11 @@ impl BsdfT for NormalMap {
 /// first if `options` ask and `n` is on the other side of `wi`; a zero or
 /// non-finite normal is the shading normal; the first tangent is the
 /// shading frame's x made orthogonal to `n` (y where they are parallel).
-pub(crate) fn perturbed_frame<R: Real>(n: V3<R>, wi: V3<R>, options: Perturbation) -> Frame<R> {
+pub(crate) fn perturbed_frame<R: ScalarReal>(
+    n: V3<R>,
+    wi: V3<R>,
+    options: Perturbation,
+) -> Frame<R> {
     let mut n = n;
     if options.flip_invalid_normals && (wi.z * wi.dot(n)).val() <= 0.0 {
         n = V3::new(-n.x, -n.y, n.z);
@@ -132,7 +136,7 @@ pub(crate) fn perturbed_frame<R: Real>(n: V3<R>, wi: V3<R>, options: Perturbatio
 /// of the perturbed normal `n` (relative to the shading frame of `si`,
 /// see [`perturbed_frame`]) and, after it, the nested context at `si`
 /// seen in that frame.
-pub(crate) fn write_perturbed<'a, R: Real>(
+pub(crate) fn write_perturbed<'a, R: ScalarReal>(
     nested: &'a Bsdf,
     store: &ParamView,
     si: &SurfaceInteraction<R>,
@@ -160,7 +164,7 @@ pub(crate) fn write_perturbed<'a, R: Real>(
 /// Gems, 2019) for the unit perturbed normal `n` and direction `wo`, both
 /// in the shading frame: Smith's G1 of a GGX surface whose α² is ⅛ of the
 /// normal's tan² θ (at most 1), as Mitsuba's `eval_shadow_terminator`.
-fn shadow_terminator<R: Real>(n: V3<R>, wo: V3<R>) -> R {
+fn shadow_terminator<R: ScalarReal>(n: V3<R>, wo: V3<R>) -> R {
     let tan2 = |v: V3<R>| {
         let z2 = v.z * v.z;
         (R::cst(1.0) - z2).max(R::cst(0.0)) / z2
@@ -176,13 +180,13 @@ fn shadow_terminator<R: Real>(n: V3<R>, wo: V3<R>) -> R {
 /// the same side of both frames: light must not leak through the surface
 /// where the perturbed normal tilts a direction across it.
 #[derive(Clone, Copy, Debug)]
-pub struct PerturbedFrameContext<R: Real> {
+pub struct PerturbedFrameContext<R: ScalarReal> {
     frame: Frame<R>,
     /// Whether values are attenuated by [`shadow_terminator`].
     shadowing: bool,
 }
 
-impl<R: Real> PerturbedFrameContext<R> {
+impl<R: ScalarReal> PerturbedFrameContext<R> {
     pub(crate) fn eval(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
         let wo_p = self.frame.to_local(wo);
         if !(wo.z.val() * wo_p.z.val() > 0.0) {

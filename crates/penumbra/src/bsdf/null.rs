@@ -2,7 +2,7 @@
 //! cut-outs): light passes straight through.
 
 use super::{BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -24,7 +24,7 @@ impl BsdfT for Null {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::NULL.union(BsdfFlags::TWO_SIDED)
     }
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         _: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -37,11 +37,11 @@ impl BsdfT for Null {
 
 /// [`Null`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct NullContext<R: Real> {
+pub struct NullContext<R: ScalarReal> {
     wi: V3<R>,
 }
 
-impl<R: Real> BsdfContextT<R> for NullContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for NullContext<R> {
     fn eval(&self, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }

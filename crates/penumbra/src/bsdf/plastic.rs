@@ -9,7 +9,7 @@ use super::{
     eta_props, eval_factor, modulate, scalar_param, smooth_sample, specular_factor, BsdfContextT,
     BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
@@ -38,7 +38,7 @@ pub struct Plastic {
 /// Diffuse term shared by `plastic` and `roughplastic`:
 /// `ρ / (1 − F_int) · cos θo / π / η² · t_i t_o` (or `ρ / (1 − ρ F_int)`).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn coated_diffuse<R: Real>(
+pub(crate) fn coated_diffuse<R: ScalarReal>(
     rho: Spectrum<R>,
     nonlinear: bool,
     internal_reflectance: R,
@@ -143,7 +143,7 @@ impl BsdfT for Plastic {
         BsdfFlags::DELTA_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -162,7 +162,7 @@ impl BsdfT for Plastic {
 
 /// [`Plastic`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct PlasticContext<'a, R: Real> {
+pub struct PlasticContext<'a, R: ScalarReal> {
     bsdf: &'a Plastic,
     wi: V3<R>,
     eta: R,
@@ -170,7 +170,7 @@ pub struct PlasticContext<'a, R: Real> {
     specular_reflectance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for PlasticContext<'_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for PlasticContext<'_, R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let cos_i = self.wi.z;
         if !(cos_i.val() > 0.0 && wo.z.val() > 0.0) {
@@ -198,7 +198,7 @@ impl<R: Real> BsdfContextT<R> for PlasticContext<'_, R> {
         }
         let f_i = fresnel_dielectric(cos_i, self.eta.val()).0;
         let pd = 1.0 - specular_probability(f_i, self.bsdf.specular_sampling_weight);
-        warp::square_to_cosine_hemisphere_pdf(wo) * pd
+        warp::square_to_cosine_hemisphere_pdf(wo.into()) * pd
     }
 
     fn sample(&self, u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
@@ -211,7 +211,7 @@ impl<R: Real> BsdfContextT<R> for PlasticContext<'_, R> {
             let w = modulate(V3::splat(f_i / ps), self.specular_reflectance);
             return Some(BsdfSample::specular_reflection(self.wi, ps, w));
         }
-        let wo = warp::square_to_cosine_hemisphere(u2);
+        let wo = Vec3::from(warp::square_to_cosine_hemisphere(u2.into()));
         smooth_sample(self, wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
     }
 

@@ -22,7 +22,7 @@ use super::{
     eta_props, eval_factor, modulate, scalar_param, smooth_sample, BsdfContextT, BsdfFlags,
     BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -123,7 +123,7 @@ impl BsdfT for PPlastic {
         BsdfFlags::GLOSSY_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -145,7 +145,7 @@ impl BsdfT for PPlastic {
 
 /// [`PPlastic`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct PPlasticContext<R: Real> {
+pub struct PPlasticContext<R: ScalarReal> {
     wi: V3<R>,
     eta: R,
     distr: MicrofacetDistribution<R>,
@@ -154,7 +154,7 @@ pub struct PPlasticContext<R: Real> {
     specular_probability: f32,
 }
 
-impl<R: Real> BsdfContextT<R> for PPlasticContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for PPlasticContext<R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let wi = self.wi;
         if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {

@@ -27,7 +27,7 @@
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet::{MicrofacetDistribution, MicrofacetType};
 use super::{smooth_sample, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
@@ -183,7 +183,7 @@ impl Principled {
     }
 
     /// The relative index of refraction, in `R`.
-    fn eta<R: Real>(&self, store: &ParamView) -> R {
+    fn eta<R: ScalarReal>(&self, store: &ParamView) -> R {
         match self.ior {
             Ior::Eta(id) => {
                 let eta = store.read::<R>(id, 0);
@@ -216,7 +216,7 @@ impl BsdfT for Principled {
         }
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -250,7 +250,7 @@ impl BsdfT for Principled {
 /// GGX roughness (αu, αv) of the main lobe from Burley 2012's
 /// parameters: α = roughness², stretched by aspect = √(1 − 0.9
 /// anisotropic), at least 0.001.
-pub(super) fn main_roughness<R: Real>(roughness: R, anisotropic: R) -> (R, R) {
+pub(super) fn main_roughness<R: ScalarReal>(roughness: R, anisotropic: R) -> (R, R) {
     let a = roughness * roughness;
     let aspect = (-(anisotropic * 0.9) + 1.0).sqrt();
     let floor = R::cst(1e-3);
@@ -258,7 +258,7 @@ pub(super) fn main_roughness<R: Real>(roughness: R, anisotropic: R) -> (R, R) {
 }
 
 /// Schlick's weight (1 − cos)⁵, with cos clamped to [0, 1].
-fn schlick_weight<R: Real>(cos: R) -> R {
+fn schlick_weight<R: ScalarReal>(cos: R) -> R {
     let m = (-cos + 1.0).clamp(0.0, 1.0);
     let m2 = m * m;
     m2 * m2 * m
@@ -268,7 +268,7 @@ fn schlick_weight<R: Real>(cos: R) -> R {
 /// interface of relative index `eta` at the microfacet cosine `cos_i`
 /// (Schlick 1994); where the light comes from the denser side, w uses the
 /// cosine of the refracted direction (0 under total internal reflection).
-pub(super) fn schlick_fresnel<R: Real>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spectrum<R> {
+pub(super) fn schlick_fresnel<R: ScalarReal>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spectrum<R> {
     let eta_it = if cos_i.val() >= 0.0 { eta } else { eta.recip() };
     let w = if eta_it.val() > 1.0 {
         schlick_weight(cos_i.abs())
@@ -281,12 +281,12 @@ pub(super) fn schlick_fresnel<R: Real>(f0: Spectrum<R>, cos_i: R, eta: R) -> Spe
 }
 
 /// Schlick's normal-incidence reflectance ((η − 1) / (η + 1))².
-pub(super) fn schlick_f0<R: Real>(eta: R) -> R {
+pub(super) fn schlick_f0<R: ScalarReal>(eta: R) -> R {
     ((eta - 1.0) / (eta + 1.0)).sqr()
 }
 
 /// `base_color / luminance` (its hue at unit luminance), white for black.
-pub(super) fn tint<R: Real>(base_color: Spectrum<R>) -> Spectrum<R> {
+pub(super) fn tint<R: ScalarReal>(base_color: Spectrum<R>) -> Spectrum<R> {
     let lum = base_color.luminance();
     if lum.val() > 0.0 {
         base_color / lum
@@ -303,7 +303,7 @@ struct Gtr1<R> {
     alpha: R,
 }
 
-impl<R: Real> Gtr1<R> {
+impl<R: ScalarReal> Gtr1<R> {
     fn eval(&self, m: V3<R>) -> R {
         let a2 = self.alpha * self.alpha;
         let d = (a2 - 1.0) / ((a2 - 1.0) * (m.z * m.z) + 1.0) / (a2.ln() * PI);
@@ -347,7 +347,7 @@ fn upper(wi: Vec3) -> Vec3 {
 
 /// [`Principled`] at a vertex: every texture evaluated there.
 #[derive(Clone, Copy, Debug)]
-pub struct PrincipledContext<'a, R: Real> {
+pub struct PrincipledContext<'a, R: ScalarReal> {
     bsdf: &'a Principled,
     wi: V3<R>,
     eta: R,
@@ -376,7 +376,7 @@ struct HalfVector {
     compatible: bool,
 }
 
-impl<R: Real> PrincipledContext<'_, R> {
+impl<R: ScalarReal> PrincipledContext<'_, R> {
     /// (brdf, bsdf): the weights (1 − metallic)(1 − spec_trans) of the
     /// diffuse and sheen lobes and (1 − metallic) spec_trans of the
     /// transmission.
@@ -488,7 +488,13 @@ impl<R: Real> PrincipledContext<'_, R> {
 /// `flatness` towards his Hanrahan-Krueger-like subsurface approximation,
 /// without the albedo / π and the cosine: a function of the cosines of
 /// `wi`, `wo` (to the normal, positive) and of the half angle `cos_d`.
-pub(super) fn diffuse_lobe<R: Real>(roughness: R, flatness: R, cos_i: R, cos_o: R, cos_d: R) -> R {
+pub(super) fn diffuse_lobe<R: ScalarReal>(
+    roughness: R,
+    flatness: R,
+    cos_i: R,
+    cos_o: R,
+    cos_d: R,
+) -> R {
     let (f_i, f_o) = (schlick_weight(cos_i), schlick_weight(cos_o));
     let f_diff = (-(f_i * 0.5) + 1.0) * (-(f_o * 0.5) + 1.0);
     let rr = roughness * cos_d * cos_d * 2.0;
@@ -503,13 +509,17 @@ pub(super) fn diffuse_lobe<R: Real>(roughness: R, flatness: R, cos_i: R, cos_o: 
 /// Burley 2012's sheen, without its weight and cosine: the Schlick
 /// weight of the half angle, tinted towards the hue of `base_color` by
 /// `sheen_tint`.
-pub(super) fn sheen_lobe<R: Real>(base_color: Spectrum<R>, sheen_tint: R, cos_d: R) -> Spectrum<R> {
+pub(super) fn sheen_lobe<R: ScalarReal>(
+    base_color: Spectrum<R>,
+    sheen_tint: R,
+    cos_d: R,
+) -> Spectrum<R> {
     let white = V3::splat(R::cst(1.0));
     let color = white + (tint(base_color) - white) * sheen_tint;
     color * schlick_weight(cos_d.abs())
 }
 
-impl<R: Real> BsdfContextT<R> for PrincipledContext<'_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for PrincipledContext<'_, R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let Some(h) = self.half_vector(wo.val()) else {
             return V3::zero();
@@ -574,7 +584,7 @@ impl<R: Real> BsdfContextT<R> for PrincipledContext<'_, R> {
         let [p_diffuse, p_clearcoat, p_trans, p_reflect] = self.lobe_probabilities(wi, f);
         let mut pdf = 0.0;
         if h.reflect {
-            pdf += p_diffuse * warp::square_to_cosine_hemisphere_pdf(wo);
+            pdf += p_diffuse * warp::square_to_cosine_hemisphere_pdf(wo.into());
         }
         if h.compatible {
             let distr = self.distr.detach();
@@ -602,7 +612,7 @@ impl<R: Real> BsdfContextT<R> for PrincipledContext<'_, R> {
         let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.dot(m), self.eta.val());
         let [p_diffuse, p_clearcoat, p_trans, _] = self.lobe_probabilities(wi, f);
         let (wo, eta, lobe) = if u1 < p_diffuse {
-            let wo = warp::square_to_cosine_hemisphere(u2);
+            let wo = Vec3::from(warp::square_to_cosine_hemisphere(u2.into()));
             (wo, 1.0, BsdfFlags::DIFFUSE_REFLECTION)
         } else if u1 < p_diffuse + p_clearcoat {
             let m = Gtr1 {

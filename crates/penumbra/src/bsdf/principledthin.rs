@@ -20,7 +20,7 @@ use super::principled::{
     diffuse_lobe, given_nonzero, main_roughness, schlick_f0, schlick_fresnel, sheen_lobe, tint,
 };
 use super::{smooth_sample, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
@@ -125,7 +125,7 @@ impl BsdfT for PrincipledThin {
         f
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -160,7 +160,7 @@ impl BsdfT for PrincipledThin {
 
 /// [`PrincipledThin`] at a vertex: every texture evaluated there.
 #[derive(Clone, Copy, Debug)]
-pub struct PrincipledThinContext<'a, R: Real> {
+pub struct PrincipledThinContext<'a, R: ScalarReal> {
     bsdf: &'a PrincipledThin,
     wi: V3<R>,
     eta: R,
@@ -178,7 +178,7 @@ pub struct PrincipledThinContext<'a, R: Real> {
 
 /// `v` mirrored to the side of +z when `side` is negative (the thin sheet
 /// is symmetric: everything is computed as seen from above).
-fn to_front<R: Real>(v: V3<R>, side: f32) -> V3<R> {
+fn to_front<R: ScalarReal>(v: V3<R>, side: f32) -> V3<R> {
     if side < 0.0 {
         -v
     } else {
@@ -198,7 +198,7 @@ fn half_vector(wi: Vec3, wo: Vec3) -> Option<(Vec3, bool)> {
     Some((wh, compatible))
 }
 
-impl<R: Real> PrincipledThinContext<'_, R> {
+impl<R: ScalarReal> PrincipledThinContext<'_, R> {
     /// Selection probabilities of (specular reflection, specular
     /// transmission, diffuse reflection, diffuse transmission).
     fn lobe_probabilities(&self) -> [f32; 4] {
@@ -218,7 +218,7 @@ impl<R: Real> PrincipledThinContext<'_, R> {
     }
 }
 
-impl<R: Real> BsdfContextT<R> for PrincipledThinContext<'_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for PrincipledThinContext<'_, R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let side = self.wi.z.val();
         if side == 0.0 || wo.z.val() == 0.0 {
@@ -276,9 +276,9 @@ impl<R: Real> BsdfContextT<R> for PrincipledThinContext<'_, R> {
         let [p_sr, p_st, p_dr, p_dt] = self.lobe_probabilities();
         let reflect = wo.z > 0.0;
         let mut pdf = if reflect {
-            p_dr * warp::square_to_cosine_hemisphere_pdf(wo)
+            p_dr * warp::square_to_cosine_hemisphere_pdf(wo.into())
         } else {
-            p_dt * warp::square_to_cosine_hemisphere_pdf(-wo)
+            p_dt * warp::square_to_cosine_hemisphere_pdf((-wo).into())
         };
         if let Some((wh, true)) = half_vector(wi, wo) {
             let jacobian = 1.0 / (4.0 * Vec3::new(wo.x, wo.y, wo.z.abs()).dot(wh)).abs();
@@ -308,12 +308,12 @@ impl<R: Real> BsdfContextT<R> for PrincipledThinContext<'_, R> {
             (Vec3::new(wo.x, wo.y, -wo.z), BsdfFlags::GLOSSY_TRANSMISSION)
         } else if u1 < p_sr + p_st + p_dr {
             (
-                warp::square_to_cosine_hemisphere(u2),
+                Vec3::from(warp::square_to_cosine_hemisphere(u2.into())),
                 BsdfFlags::DIFFUSE_REFLECTION,
             )
         } else {
             (
-                -warp::square_to_cosine_hemisphere(u2),
+                -Vec3::from(warp::square_to_cosine_hemisphere(u2.into())),
                 BsdfFlags::DIFFUSE_TRANSMISSION,
             )
         };

@@ -9,7 +9,7 @@ use super::{
     default_albedo, eval_factor, modulate, specular_factor, BsdfContextT, BsdfFlags, BsdfSample,
     BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -47,7 +47,7 @@ impl BsdfT for RoughConductor {
         BsdfFlags::GLOSSY_REFLECTION
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -65,14 +65,14 @@ impl BsdfT for RoughConductor {
 
 /// [`RoughConductor`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct RoughConductorContext<R: Real> {
+pub struct RoughConductorContext<R: ScalarReal> {
     wi: V3<R>,
     distr: MicrofacetDistribution<R>,
     ior: ConductorIorValue<R>,
     specular_reflectance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for RoughConductorContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for RoughConductorContext<R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let wi = self.wi;
         if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {

@@ -8,7 +8,7 @@ use super::{
     default_albedo, eta_props, eval_factor, modulate, scalar_param, smooth_sample,
     specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -84,7 +84,7 @@ impl BsdfT for RoughDielectric {
             .union(BsdfFlags::TWO_SIDED)
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -103,7 +103,7 @@ impl BsdfT for RoughDielectric {
 
 /// [`RoughDielectric`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct RoughDielectricContext<R: Real> {
+pub struct RoughDielectricContext<R: ScalarReal> {
     wi: V3<R>,
     eta: R,
     distr: MicrofacetDistribution<R>,
@@ -111,7 +111,7 @@ pub struct RoughDielectricContext<R: Real> {
     specular_transmittance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for RoughDielectricContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for RoughDielectricContext<R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let eta_p = self.eta;
         let wi = self.wi;

@@ -16,7 +16,7 @@ use super::{
     eta_props, eval_factor, modulate, scalar_param, smooth_sample, BsdfContextT, BsdfFlags,
     BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{warp, Spectrum, V3};
@@ -114,7 +114,7 @@ impl RoughPlastic {
 
     /// Table lookup with linear interpolation in cos θ (differentiable in
     /// `cos`: the slope of the interpolating segment).
-    fn transmittance<R: Real>(&self, cos: R) -> R {
+    fn transmittance<R: ScalarReal>(&self, cos: R) -> R {
         let t = &self.external_transmittance;
         let x = cos.clamp(0.0, 1.0) * (TABLE_RES - 1) as f32;
         let i = (x.val() as usize).min(TABLE_RES - 2);
@@ -256,7 +256,7 @@ fn rough_interface_tables(kind: MicrofacetType, alpha: f32, eta: f32) -> (Vec<f3
 /// `F D G / (4 cos θi)`: the rough dielectric reflection of a coating
 /// (times cos θo), shared by `roughplastic` and `pplastic`; zero where the
 /// half vector has no density.
-pub(crate) fn coating_reflection<R: Real>(
+pub(crate) fn coating_reflection<R: ScalarReal>(
     distr: &MicrofacetDistribution<R>,
     wi: V3<R>,
     wo: V3<R>,
@@ -286,7 +286,7 @@ pub(crate) fn glossy_or_diffuse_pdf(
     } else {
         0.0
     };
-    ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo)
+    ps * p_spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wo.into())
 }
 
 /// A direction from a coating's two lobes (see [`glossy_or_diffuse_pdf`])
@@ -306,7 +306,7 @@ pub(crate) fn sample_glossy_or_diffuse(
         )
     } else {
         (
-            warp::square_to_cosine_hemisphere(u2),
+            Vec3::from(warp::square_to_cosine_hemisphere(u2.into())),
             BsdfFlags::DIFFUSE_REFLECTION,
         )
     };
@@ -318,7 +318,7 @@ impl BsdfT for RoughPlastic {
         BsdfFlags::GLOSSY_REFLECTION.union(BsdfFlags::DIFFUSE_REFLECTION)
     }
 
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -339,7 +339,7 @@ impl BsdfT for RoughPlastic {
 
 /// [`RoughPlastic`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct RoughPlasticContext<'a, R: Real> {
+pub struct RoughPlasticContext<'a, R: ScalarReal> {
     bsdf: &'a RoughPlastic,
     wi: V3<R>,
     eta: R,
@@ -348,7 +348,7 @@ pub struct RoughPlasticContext<'a, R: Real> {
     specular_reflectance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for RoughPlasticContext<'_, R> {
+impl<R: ScalarReal> BsdfContextT<R> for RoughPlasticContext<'_, R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
         let wi = self.wi;
         if !(wi.z.val() > 0.0 && wo.z.val() > 0.0) {

@@ -4,7 +4,7 @@
 //! check of derivatives with respect to the directions.
 
 use super::{Bsdf, BsdfContextT, BsdfFlags, BsdfT};
-use crate::ad::{Dual, Real};
+use crate::ad::{Dual, ScalarReal};
 use crate::error::SrcLoc;
 use crate::geometry::SurfaceInteraction;
 use crate::math::warp::square_to_uniform_sphere;
@@ -69,7 +69,7 @@ pub fn dir(cos_theta: f32, phi: f32) -> Vec3 {
 
 /// A surface interaction at the origin with the standard frame and the
 /// given local incident direction.
-pub fn si<R: Real>(wi: Vec3) -> SurfaceInteraction<R> {
+pub fn si<R: ScalarReal>(wi: Vec3) -> SurfaceInteraction<R> {
     SurfaceInteraction {
         t: R::cst(1.0),
         p: V3::zero(),

@@ -7,7 +7,7 @@ use super::{
     default_albedo, eta_props, eval_factor, modulate, sample_reflect_or_transmit, scalar_param,
     specular_factors, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -54,7 +54,7 @@ impl BsdfT for ThinDielectric {
             .union(BsdfFlags::NULL)
             .union(BsdfFlags::TWO_SIDED)
     }
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -72,14 +72,14 @@ impl BsdfT for ThinDielectric {
 
 /// [`ThinDielectric`] at a vertex.
 #[derive(Clone, Copy, Debug)]
-pub struct ThinDielectricContext<R: Real> {
+pub struct ThinDielectricContext<R: ScalarReal> {
     wi: V3<R>,
     eta: R,
     specular_reflectance: Option<Spectrum<R>>,
     specular_transmittance: Option<Spectrum<R>>,
 }
 
-impl<R: Real> BsdfContextT<R> for ThinDielectricContext<R> {
+impl<R: ScalarReal> BsdfContextT<R> for ThinDielectricContext<R> {
     fn eval(&self, _: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
@@ -108,7 +108,7 @@ impl<R: Real> BsdfContextT<R> for ThinDielectricContext<R> {
     }
 }
 
-impl<R: Real> ThinDielectricContext<R> {
+impl<R: ScalarReal> ThinDielectricContext<R> {
     /// `R'`, the reflectance with the internal bounces.
     fn reflectance(&self) -> R {
         let (f, ..) = fresnel_dielectric(self.wi.z.abs(), self.eta);

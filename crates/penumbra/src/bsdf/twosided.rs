@@ -4,7 +4,7 @@
 use super::{
     nested_bsdfs, Bsdf, BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NestedContext, NodeContext,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -23,13 +23,13 @@ pub struct TwoSided {
     pub back: Box<Bsdf>,
 }
 
-fn flip<R: Real>(si: &SurfaceInteraction<R>) -> SurfaceInteraction<R> {
+fn flip<R: ScalarReal>(si: &SurfaceInteraction<R>) -> SurfaceInteraction<R> {
     let mut s = *si;
     s.wi = V3::new(si.wi.x, si.wi.y, -si.wi.z);
     s
 }
 
-fn flip_v<R: Real>(v: V3<R>) -> V3<R> {
+fn flip_v<R: ScalarReal>(v: V3<R>) -> V3<R> {
     V3::new(v.x, v.y, -v.z)
 }
 
@@ -72,7 +72,7 @@ impl BsdfT for TwoSided {
 
     /// Only the side `si.wi` is on gets a context (the front's when `wi`
     /// is in the surface, for the albedo).
-    fn write_context<'a, R: Real>(
+    fn write_context<'a, R: ScalarReal>(
         &'a self,
         store: &ParamView,
         si: &SurfaceInteraction<R>,
@@ -114,7 +114,11 @@ pub struct TwoSidedContext {
 }
 
 impl TwoSidedContext {
-    pub(crate) fn eval<R: Real>(&self, this: NestedContext<'_, '_, R>, wo: V3<R>) -> Spectrum<R> {
+    pub(crate) fn eval<R: ScalarReal>(
+        &self,
+        this: NestedContext<'_, '_, R>,
+        wo: V3<R>,
+    ) -> Spectrum<R> {
         match self.side {
             Side::Front => this.at(1).eval(wo),
             Side::Back => this.at(1).eval(flip_v(wo)),
@@ -122,7 +126,7 @@ impl TwoSidedContext {
         }
     }
 
-    pub(crate) fn pdf<R: Real>(&self, this: NestedContext<'_, '_, R>, wo: Vec3) -> f32 {
+    pub(crate) fn pdf<R: ScalarReal>(&self, this: NestedContext<'_, '_, R>, wo: Vec3) -> f32 {
         match self.side {
             Side::Front => this.at(1).pdf(wo),
             Side::Back => this.at(1).pdf(flip_v(V3::from(wo)).val()),
@@ -130,7 +134,7 @@ impl TwoSidedContext {
         }
     }
 
-    pub(crate) fn sample<R: Real>(
+    pub(crate) fn sample<R: ScalarReal>(
         &self,
         this: NestedContext<'_, '_, R>,
         u1: f32,
@@ -147,11 +151,14 @@ impl TwoSidedContext {
         }
     }
 
-    pub(crate) fn albedo<R: Real>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+    pub(crate) fn albedo<R: ScalarReal>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
         this.at(1).albedo()
     }
 
-    pub(crate) fn null_transmission<R: Real>(&self, this: NestedContext<'_, '_, R>) -> Spectrum<R> {
+    pub(crate) fn null_transmission<R: ScalarReal>(
+        &self,
+        this: NestedContext<'_, '_, R>,
+    ) -> Spectrum<R> {
         match self.side {
             Side::Front | Side::Back => this.at(1).null_transmission(),
             Side::Edge => V3::zero(),

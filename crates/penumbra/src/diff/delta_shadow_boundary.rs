@@ -36,7 +36,7 @@
 
 use super::shadow_boundary::{end_points, CandidateEdges};
 use super::splat::{add_splat_gradients, add_splats, BoundarySamples, FilmSplatter};
-use crate::ad::{Dual, Real, Var};
+use crate::ad::{Dual, ScalarReal, Var};
 use crate::emitter::DeltaOrigin;
 use crate::error::Result;
 use crate::geometry::edges::{EdgeTable, Eye};
@@ -120,7 +120,7 @@ impl<'a> Context<'a> {
 
     /// The film position (crop-window pixels) of the shadow of `m` cast by
     /// `origin` on the surface of `hit`, in `R`.
-    fn shadow_on_film<R: Real>(
+    fn shadow_on_film<R: ScalarReal>(
         &self,
         store: &ParamView,
         m: V3<R>,
@@ -149,7 +149,7 @@ impl<'a> Context<'a> {
 
     /// `⟨x(θ), n⟩` of sample `s` in `R`: its derivative is the normal
     /// velocity of the film curve.
-    fn normal_position<R: Real>(&self, store: &ParamView, s: &Sample) -> Option<R> {
+    fn normal_position<R: ScalarReal>(&self, store: &ParamView, s: &Sample) -> Option<R> {
         let scene = self.scene;
         let mesh = scene.shapes[s.shape as usize].as_mesh()?;
         let (p0, p1) = end_points::<R>(mesh, store, s.edge);

@@ -123,7 +123,7 @@
 
 use super::splat::{FilmSplatter, Region};
 use crate::ad::reverse::{backward, clear_tape};
-use crate::ad::{Dual, Real, Var};
+use crate::ad::{Dual, ScalarReal, Var};
 use crate::error::Result;
 use crate::geometry::edges::{Edge, EdgeKind, EdgeTable, Eye};
 use crate::geometry::{DiffRay, Mesh, Shape};
@@ -158,7 +158,7 @@ pub(crate) fn applies(scene: &Scene, opts: &RenderOptions) -> Result<bool> {
 /// motion. Forward mode (`Dual`) keeps the tangents of the end points;
 /// reverse mode (`Var`) keeps nothing, since a tape holds one edge at a
 /// time: it records the edge again to backpropagate its samples' weight.
-trait EdgeMotion: Real {
+trait EdgeMotion: ScalarReal {
     type Motion: Sync;
     /// Runs `project`, which computes the film end points of one edge in
     /// `Self` and something primal, and returns the end points' values and
@@ -243,7 +243,7 @@ impl<M> Segment<M> {
 /// world positions (primal); `None` if the edge is wholly behind the near
 /// plane or the camera has no projection. Forward and reverse mode both
 /// run this, so the motion they differentiate is the same.
-fn project_edge<R: Real>(
+fn project_edge<R: ScalarReal>(
     sensor: &Sensor,
     store: &ParamView,
     mesh: &Mesh,
@@ -320,7 +320,11 @@ impl Outline {
 /// The angle's origin is a fixed (primal) function of the view, so a
 /// point of fixed angle moves smoothly with the parameters; only the
 /// normal component of its velocity matters.
-fn outline<R: Real>(proj: &Projector<R>, store: &ParamView, shape: &Shape) -> Option<[V3<R>; 3]> {
+fn outline<R: ScalarReal>(
+    proj: &Projector<R>,
+    store: &ParamView,
+    shape: &Shape,
+) -> Option<[V3<R>; 3]> {
     match shape {
         Shape::Mesh(_) | Shape::Cylinder(_) => None,
         Shape::Disk(d) => {
@@ -365,7 +369,7 @@ type Projected<R> = (V2<R>, V2<R>, ([Vec3; 2], Option<Outline>));
 /// outline of the analytic `shape` seen by `sensor`, between the outline's
 /// points at angles 2πk/N and 2π(k + 1)/N, their world positions and the
 /// outline (primal); `None` if either end point is behind the near plane.
-fn project_chord<R: Real>(
+fn project_chord<R: ScalarReal>(
     sensor: &Sensor,
     store: &ParamView,
     shape: &Shape,
@@ -397,7 +401,7 @@ fn project_chord<R: Real>(
 
 /// [`project_edge`] for edge `index` of a mesh, [`project_chord`] for
 /// chord `index` of the outline of an analytic shape.
-fn project_segment<R: Real>(
+fn project_segment<R: ScalarReal>(
     sensor: &Sensor,
     store: &ParamView,
     shape: &Shape,

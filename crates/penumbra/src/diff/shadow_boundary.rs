@@ -68,7 +68,7 @@
 //! ([`super::warn_missing_boundary_terms`]).
 
 use super::splat::{add_splat_gradients, add_splats, BoundarySamples, FilmSplatter};
-use crate::ad::{Dual, Real, Var};
+use crate::ad::{Dual, ScalarReal, Var};
 use crate::bsdf::BsdfContextT;
 use crate::emitter::EmitterT;
 use crate::error::Result;
@@ -267,7 +267,7 @@ impl<'a> Context<'a> {
     /// `V⁻`, `V⁺` of `s` in `R` (module documentation): normal components
     /// of the relative velocities, whose values are (near) zero and whose
     /// derivatives are the velocities.
-    fn velocities<R: Real>(&self, store: &ParamView, s: &Sample) -> [R; 2] {
+    fn velocities<R: ScalarReal>(&self, store: &ParamView, s: &Sample) -> [R; 2] {
         let scene = self.scene;
         let cs = self.film.camera_sample(s.x);
         let ray = cs.ray::<R>(store);
@@ -363,7 +363,7 @@ impl BoundarySamples for Context<'_> {
         }
         let xp = back.at(hx.t);
         let q = self.proj.to_local(V3::cst(xp));
-        if !(q.z.val() > self.proj.near) {
+        if !(q.z > self.proj.near) {
             return None;
         }
         let x = self.film.to_pixels(self.proj.film(q).val());
@@ -432,7 +432,11 @@ impl BoundarySamples for Context<'_> {
 }
 
 /// The world end points of edge `edge` of `mesh`, in `R`.
-pub(super) fn end_points<R: Real>(mesh: &Mesh, store: &ParamView, edge: u32) -> (V3<R>, V3<R>) {
+pub(super) fn end_points<R: ScalarReal>(
+    mesh: &Mesh,
+    store: &ParamView,
+    edge: u32,
+) -> (V3<R>, V3<R>) {
     let e = &mesh.edges(store).edges[edge as usize];
     let (_, tri) = mesh.triangle_r::<R>(store, e.face);
     let k = e.corner as usize;

@@ -2,7 +2,7 @@
 //! normal points to.
 
 use super::{emission_prop, eval_at, surface_si, DirectionSample, EmitterSample, EmitterT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::{Hit, PositionSample, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Spectrum, V3};
@@ -50,7 +50,7 @@ impl Area {
     /// area to solid angle at `ref_p`, `area_scale · |cos θ_e| / dist²`
     /// (Zhang et al. 2020, "Path-Space Differentiable Rendering", §4).
     #[inline(always)]
-    pub fn sample_from_position<R: Real>(
+    pub fn sample_from_position<R: ScalarReal>(
         &self,
         store: &ParamView,
         ps: &PositionSample,
@@ -71,7 +71,7 @@ impl Area {
     /// the direction sample, the direction in `R` and the Jacobian's
     /// derivative factor (1 in value).
     #[inline(always)]
-    fn direction_to<R: Real>(
+    fn direction_to<R: ScalarReal>(
         ps: &PositionSample,
         p: V3<R>,
         n: V3<R>,
@@ -121,7 +121,7 @@ impl Area {
 }
 
 impl EmitterT for Area {
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         shapes: &[Shape],
@@ -187,14 +187,18 @@ impl EmitterT for Area {
 
     /// Radiance towards `si.wi` if it is on the front side (shading frame
     /// cos θ > 0, as Mitsuba), else zero.
-    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+    ) -> Spectrum<R> {
         if !(si.wi.z.val() > 0.0) {
             return V3::zero();
         }
         self.radiance.eval(store, si)
     }
 
-    fn eval_environment<R: Real>(&self, _store: &ParamView, _d: V3<R>) -> Spectrum<R> {
+    fn eval_environment<R: ScalarReal>(&self, _store: &ParamView, _d: V3<R>) -> Spectrum<R> {
         V3::zero()
     }
     fn is_delta(&self) -> bool {
@@ -237,7 +241,7 @@ mod tests {
     }
 
     /// The rectangle's sample as a (constant) surface interaction.
-    fn ps_si<R: Real>(ps: &PositionSample) -> SurfaceInteraction<R> {
+    fn ps_si<R: ScalarReal>(ps: &PositionSample) -> SurfaceInteraction<R> {
         surface_si(ps.p, ps.n, ps.uv, -ps.n, 3, ps.prim)
     }
 

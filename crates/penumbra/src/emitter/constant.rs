@@ -4,7 +4,7 @@ use super::{
     emission_prop, eval_uniform, far_point, BoundingSphere, DirectionSample, EmitterSample,
     EmitterT,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{warp, Spectrum, V3};
@@ -32,7 +32,7 @@ impl Constant {
 }
 
 impl EmitterT for Constant {
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],
@@ -65,10 +65,10 @@ impl EmitterT for Constant {
     ) -> f32 {
         warp::UNIFORM_SPHERE_PDF
     }
-    fn eval_surface<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: ScalarReal>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
     }
-    fn eval_environment<R: Real>(&self, store: &ParamView, _d: V3<R>) -> Spectrum<R> {
+    fn eval_environment<R: ScalarReal>(&self, store: &ParamView, _d: V3<R>) -> Spectrum<R> {
         eval_uniform::<R>(&self.radiance, store)
     }
     fn is_delta(&self) -> bool {

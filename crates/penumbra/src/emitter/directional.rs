@@ -3,7 +3,7 @@
 
 use super::{delta_light_queries, emission_prop, eval_uniform, far_point, vec3_or_to_world};
 use super::{BoundingSphere, DirectionSample, EmitterSample, EmitterT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
@@ -43,7 +43,7 @@ impl Directional {
 impl EmitterT for Directional {
     /// The direction towards the light (`−direction`), weight `E` (pdf 1,
     /// delta, infinite distance; `p` is outside the scene bounds).
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],

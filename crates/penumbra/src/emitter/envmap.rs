@@ -2,7 +2,7 @@
 //! latitude-longitude image, importance-sampled by luminance.
 
 use super::{far_point, BoundingSphere, DirectionSample, EmitterSample, EmitterT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::image::{read_image, srgb_to_linear, Image};
@@ -137,7 +137,7 @@ impl Envmap {
 
     /// Local direction → (u, v) in [0,1)×[0,1] (Mitsuba's convention).
     #[inline]
-    pub fn direction_to_uv<R: Real>(d: V3<R>) -> V2<R> {
+    pub fn direction_to_uv<R: ScalarReal>(d: V3<R>) -> V2<R> {
         let u = d.x.atan2(-d.z) * (0.5 / PI);
         let v = d.y.acos() / PI;
         V2::new(u - floor_i64(u.val()) as f32, v)
@@ -154,7 +154,7 @@ impl Envmap {
     /// Texel-grid coordinates of (u, v): x in [0, w) (periodic), y in
     /// [0, h−1].
     #[inline]
-    fn uv_to_grid<R: Real>(&self, uv: V2<R>) -> V2<R> {
+    fn uv_to_grid<R: ScalarReal>(&self, uv: V2<R>) -> V2<R> {
         let x = uv.x - 0.5 / self.width as f32;
         V2::new(
             (x - floor_i64(x.val()) as f32) * self.width as f32,
@@ -165,7 +165,7 @@ impl Envmap {
     /// Bilinear radiance (times scale) at texel-grid coordinates `g`; the
     /// bilinear weights are differentiable in `g` (the direction looked
     /// along moves when the camera or a mirror does).
-    fn lookup<R: Real>(&self, store: &ParamView, g: V2<R>) -> Spectrum<R> {
+    fn lookup<R: ScalarReal>(&self, store: &ParamView, g: V2<R>) -> Spectrum<R> {
         let (w, h) = (self.width, self.height);
         let x0 = (floor_i64(g.x.val()).max(0) as usize).min(w - 1);
         let y0 = (floor_i64(g.y.val()).max(0) as usize).min(h - 2);
@@ -179,13 +179,13 @@ impl Envmap {
         (top * (one - fy) + bottom * fy) * s
     }
 
-    fn to_local<R: Real>(&self, d: V3<R>) -> V3<R> {
+    fn to_local<R: ScalarReal>(&self, d: V3<R>) -> V3<R> {
         self.to_world.inverse().vector_r(d).normalize()
     }
 }
 
 impl EmitterT for Envmap {
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],
@@ -243,13 +243,13 @@ impl EmitterT for Envmap {
         dist.pdf(s) / (2.0 * PI * PI * sin_theta.max(1e-7))
     }
 
-    fn eval_surface<R: Real>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: ScalarReal>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()
     }
 
     /// Radiance seen looking along world direction `d` (the direction of
     /// a ray that escaped the scene).
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
+    fn eval_environment<R: ScalarReal>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
         let local = self.to_local(d);
         self.lookup(store, self.uv_to_grid(Envmap::direction_to_uv(local)))
     }

@@ -17,7 +17,7 @@ pub use point::Point;
 pub use projector::Projector;
 pub use spot::Spot;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::{Shape, SurfaceInteraction};
 use crate::math::{Frame, Spectrum, Transform, V2, V3};
@@ -57,7 +57,7 @@ pub(crate) fn far_point(bs: &BoundingSphere, ref_p: Vec3, d: Vec3) -> Vec3 {
 /// position `p`, unit normal `n`, `wi_world` the unit direction leaving
 /// the surface.
 #[inline(always)]
-pub(crate) fn surface_si<R: Real>(
+pub(crate) fn surface_si<R: ScalarReal>(
     p: Vec3,
     n: Vec3,
     uv: Vec2,
@@ -90,7 +90,7 @@ pub(crate) fn surface_si<R: Real>(
 /// scene, or an area light's uniform radiance at each of its samples)
 /// needs none.
 #[inline]
-pub(crate) fn eval_at<R: Real>(
+pub(crate) fn eval_at<R: ScalarReal>(
     t: &Texture,
     store: &ParamView,
     si: impl FnOnce() -> SurfaceInteraction<f32>,
@@ -104,7 +104,7 @@ pub(crate) fn eval_at<R: Real>(
 /// A texture evaluated where position does not matter (uniform values of
 /// point, spot, directional and constant emitters): at uv = (0, 0).
 #[inline]
-pub(crate) fn eval_uniform<R: Real>(t: &Texture, store: &ParamView) -> Spectrum<R> {
+pub(crate) fn eval_uniform<R: ScalarReal>(t: &Texture, store: &ParamView) -> Spectrum<R> {
     eval_at(t, store, || {
         surface_si(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0)
     })
@@ -147,7 +147,7 @@ pub(crate) fn vec3_or_to_world(
 /// normal; with the direction and squared distance (for the inverse-square
 /// falloff) in `R`, following the reference point and the light. `None`
 /// when `ref_p` is at the light.
-pub(crate) fn point_light_sample<R: Real>(
+pub(crate) fn point_light_sample<R: ScalarReal>(
     p: V3<R>,
     ref_p: V3<R>,
 ) -> Option<(DirectionSample, V3<R>, R)> {
@@ -185,14 +185,14 @@ macro_rules! delta_light_queries {
         ) -> f32 {
             0.0
         }
-        fn eval_surface<R: $crate::ad::Real>(
+        fn eval_surface<R: $crate::ad::ScalarReal>(
             &self,
             _: &$crate::params::ParamView,
             _: &$crate::geometry::SurfaceInteraction<R>,
         ) -> $crate::math::Spectrum<R> {
             $crate::math::V3::zero()
         }
-        fn eval_environment<R: $crate::ad::Real>(
+        fn eval_environment<R: $crate::ad::ScalarReal>(
             &self,
             _: &$crate::params::ParamView,
             _: $crate::math::V3<R>,
@@ -220,7 +220,7 @@ pub struct EmitterSample<R> {
     pub weight: Spectrum<R>,
 }
 
-impl<R: Real> EmitterSample<R> {
+impl<R: ScalarReal> EmitterSample<R> {
     /// A sample whose direction does not move (environment and
     /// directional emitters: their points are at infinity).
     pub(crate) fn fixed_direction(ds: DirectionSample, weight: Spectrum<R>) -> Self {
@@ -255,7 +255,7 @@ pub struct DirectionSample {
 pub trait EmitterT {
     /// Samples a direction from `ref_p` towards the emitter. Returns the
     /// sample and `radiance / pdf` (visibility not included).
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         shapes: &[Shape],
@@ -275,11 +275,15 @@ pub trait EmitterT {
         n: Vec3,
     ) -> f32;
     /// Radiance leaving a surface emitter at `si` towards `si.wi`.
-    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn eval_surface<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+    ) -> Spectrum<R>;
     /// Radiance arriving from infinity along ray direction `d` (environment
     /// emitters; zero for others), in `R`: the direction follows the camera
     /// or a specular chain when they move.
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R>;
+    fn eval_environment<R: ScalarReal>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R>;
     /// True for point, spot, projector and directional emitters.
     fn is_delta(&self) -> bool;
     /// True for constant and envmap emitters.
@@ -314,7 +318,7 @@ macro_rules! dispatch {
 
 impl EmitterT for Emitter {
     #[inline]
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         shapes: &[Shape],
@@ -336,11 +340,15 @@ impl EmitterT for Emitter {
         dispatch!(self, e => e.pdf_direction(store, shapes, ref_p, d, p, n))
     }
     #[inline]
-    fn eval_surface<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval_surface<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+    ) -> Spectrum<R> {
         dispatch!(self, e => e.eval_surface(store, si))
     }
     #[inline]
-    fn eval_environment<R: Real>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
+    fn eval_environment<R: ScalarReal>(&self, store: &ParamView, d: V3<R>) -> Spectrum<R> {
         dispatch!(self, e => e.eval_environment(store, d))
     }
     fn is_delta(&self) -> bool {
@@ -362,7 +370,7 @@ pub enum DeltaOrigin<R> {
 impl Emitter {
     /// The origin of a point, spot, projector or directional emitter's light, in `R`
     /// (a point light's `position` is a parameter); `None` for the others.
-    pub(crate) fn delta_origin<R: Real>(&self, store: &ParamView) -> Option<DeltaOrigin<R>> {
+    pub(crate) fn delta_origin<R: ScalarReal>(&self, store: &ParamView) -> Option<DeltaOrigin<R>> {
         match self {
             Emitter::Point(p) => Some(DeltaOrigin::Point(store.read3(p.position, 0))),
             Emitter::Spot(s) => Some(DeltaOrigin::Point(V3::cst(s.to_world.point(Vec3::ZERO)))),

@@ -4,7 +4,7 @@ use super::{
     delta_light_queries, emission_prop, eval_uniform, point_light_sample, vec3_or_to_world,
     EmitterSample, EmitterT,
 };
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::V3;
@@ -44,7 +44,7 @@ impl Point {
 
 impl EmitterT for Point {
     /// The light's position, with weight `I / dist²` (pdf 1, delta).
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],

@@ -5,7 +5,7 @@
 
 use super::{delta_light_queries, emission_prop, point_light_sample, surface_si};
 use super::{EmitterSample, EmitterT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::{Transform, V2, V3};
@@ -67,7 +67,7 @@ impl Projector {
 
     /// The texture's uv for a point at `local` in the projector's frame
     /// (z > 0), as the perspective camera maps it onto its film.
-    pub fn local_to_uv<R: Real>(&self, local: V3<R>) -> V2<R> {
+    pub fn local_to_uv<R: ScalarReal>(&self, local: V3<R>) -> V2<R> {
         let k = local.z * self.tan_half_fov;
         V2::new(
             R::cst(0.5) - R::cst(0.5) * local.x / k,
@@ -79,7 +79,7 @@ impl Projector {
 impl EmitterT for Projector {
     /// The projector's position, with weight `π · scale · E(uv) / (z² cos θ)`
     /// (pdf 1, delta); `None` outside the projected image.
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],

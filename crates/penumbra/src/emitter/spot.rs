@@ -4,7 +4,7 @@
 
 use super::{delta_light_queries, emission_prop, eval_uniform, point_light_sample, surface_si};
 use super::{EmitterSample, EmitterT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Shape;
 use crate::math::{Transform, V2, V3};
@@ -66,7 +66,7 @@ impl Spot {
     /// The angular falloff for an emitted direction `local` (unit, in the
     /// light's frame): 1 inside the beam, `(cutoff − θ) / (cutoff − beam)`
     /// in the transition, 0 outside the cutoff.
-    pub fn falloff<R: Real>(&self, local: V3<R>) -> R {
+    pub fn falloff<R: ScalarReal>(&self, local: V3<R>) -> R {
         let cos_theta = local.z;
         if !(cos_theta.val() > self.cutoff.cos()) {
             return R::cst(0.0);
@@ -82,7 +82,7 @@ impl Spot {
     /// The texture's uv for an emitted direction `local` (in the light's
     /// frame, z > 0): the direction's slopes x/z, y/z over tan(cutoff),
     /// mapped from [−1, 1] to [0, 1], as Mitsuba's `spot` maps them.
-    pub fn direction_to_uv<R: Real>(&self, local: V3<R>) -> V2<R> {
+    pub fn direction_to_uv<R: ScalarReal>(&self, local: V3<R>) -> V2<R> {
         let k = local.z * self.cutoff.tan();
         V2::new(
             R::cst(0.5) + R::cst(0.5) * local.x / k,
@@ -94,7 +94,7 @@ impl Spot {
 impl EmitterT for Spot {
     /// The light's position, with weight `I · falloff / dist²` (pdf 1,
     /// delta); `None` outside the cone.
-    fn sample_direction<R: Real>(
+    fn sample_direction<R: ScalarReal>(
         &self,
         store: &ParamView,
         _shapes: &[Shape],

@@ -30,7 +30,7 @@
 //! shapes (their vertex positions, BSDFs, …) are differentiable, and
 //! derivatives flow through every instance of the group.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, Ray, Shape, ShapeT, SurfaceInteraction};
 use crate::math::{Frame, Transform};
@@ -165,7 +165,7 @@ impl Instance {
     /// `R`, the point sliding along the world ray `ray`: the group's shape
     /// re-evaluates it along the ray transformed into the group's space,
     /// and the result is mapped to world space.
-    pub fn surface_interaction<R: Real>(
+    pub fn surface_interaction<R: ScalarReal>(
         &self,
         shape: &Shape,
         store: &ParamView,
@@ -194,7 +194,7 @@ impl Instance {
     /// The point of `shape` (of this instance's group) with the surface
     /// coordinates of `hit`, moving with the shape (see
     /// [`ShapeT::point_at`]); `p` is the primal world point.
-    pub fn point_at<R: Real>(
+    pub fn point_at<R: ScalarReal>(
         &self,
         shape: &Shape,
         store: &ParamView,
@@ -210,7 +210,10 @@ impl Instance {
 
     /// `si` (in the group's space) mapped to world space; `t` and `wi`
     /// are left as they were.
-    fn to_world_interaction<R: Real>(&self, si: SurfaceInteraction<R>) -> SurfaceInteraction<R> {
+    fn to_world_interaction<R: ScalarReal>(
+        &self,
+        si: SurfaceInteraction<R>,
+    ) -> SurfaceInteraction<R> {
         let m = &self.xf;
         let n = m.normal_r(si.n);
         // Nanson's formula: an area element of unit normal n' becomes

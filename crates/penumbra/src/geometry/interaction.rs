@@ -1,6 +1,6 @@
 //! Rays, hits and surface interactions.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::math::{Frame, RAY_EPSILON, V2, V3};
 use glam::{Vec2, Vec3};
 
@@ -43,7 +43,7 @@ pub struct DiffRay<R> {
     pub tmax: f32,
 }
 
-impl<R: Real> DiffRay<R> {
+impl<R: ScalarReal> DiffRay<R> {
     /// A ray with constant origin and direction.
     #[inline(always)]
     pub fn cst(ray: &Ray) -> Self {
@@ -121,7 +121,7 @@ pub struct SurfaceInteraction<R> {
     pub bary: V2<R>,
 }
 
-impl<R: Real> SurfaceInteraction<R> {
+impl<R: ScalarReal> SurfaceInteraction<R> {
     /// An interaction whose every quantity is a constant (the f32
     /// re-evaluation of a surface that does not move).
     #[inline(always)]

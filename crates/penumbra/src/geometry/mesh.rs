@@ -33,7 +33,7 @@
 //! renderer relies on manifoldness (the edge table treats such an edge as
 //! one junction, see [`crate::geometry::edges`]).
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::edges::EdgeTable;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction, SurfacePoint};
@@ -527,7 +527,7 @@ impl Mesh {
 
     /// The change of `to_world` along its tangent (rows 0–2, value zero),
     /// if reads of it carry derivatives in `R`.
-    fn to_world_tangent<R: Real>(&self, store: &ParamView) -> Option<[[R; 4]; 3]> {
+    fn to_world_tangent<R: ScalarReal>(&self, store: &ParamView) -> Option<[[R; 4]; 3]> {
         if !R::tracks(store, self.to_world_id) {
             return None;
         }
@@ -553,7 +553,7 @@ impl Mesh {
 
     /// The vertex indices and positions (in `R`) of triangle `prim`.
     #[inline(always)]
-    pub(crate) fn triangle_r<R: Real>(
+    pub(crate) fn triangle_r<R: ScalarReal>(
         &self,
         store: &ParamView,
         prim: u32,
@@ -580,7 +580,7 @@ impl Mesh {
     /// derivatives): Möller–Trumbore (Möller and Trumbore 1997, "Fast,
     /// Minimum Storage Ray/Triangle Intersection") in `R` from the vertex
     /// positions read through the store.
-    pub fn triangle_interaction<R: Real>(
+    pub fn triangle_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -632,7 +632,7 @@ impl Mesh {
 
     /// The vertex normal of vertex `v` recomputed from the positions in `R`
     /// (the same formula as [`vertex_normals`]).
-    fn derived_normal<R: Real>(&self, store: &ParamView, v: usize) -> V3<R> {
+    fn derived_normal<R: ScalarReal>(&self, store: &ParamView, v: usize) -> V3<R> {
         let mut acc = V3::zero();
         for &f in self.vertex_faces.of(v) {
             let face = self.faces[f as usize];
@@ -648,7 +648,11 @@ impl Mesh {
 
     /// The point of triangle `hit.prim` at the fixed barycentrics `hit.uv`,
     /// moving with the triangle's vertices; `wi` is left zero.
-    pub fn triangle_point<R: Real>(&self, store: &ParamView, hit: &Hit) -> SurfaceInteraction<R> {
+    pub fn triangle_point<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+    ) -> SurfaceInteraction<R> {
         let (idx, [p0, p1, p2]) = self.triangle_r::<R>(store, hit.prim);
         let (b1, b2) = (R::cst(hit.uv.x), R::cst(hit.uv.y));
         let p = p0 * (R::cst(1.0) - b1 - b2) + p1 * b1 + p2 * b2;
@@ -659,7 +663,7 @@ impl Mesh {
     /// triangle with vertex indices `idx` and positions `ps`; `wi` zero.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn local_geometry<R: Real>(
+    fn local_geometry<R: ScalarReal>(
         &self,
         store: &ParamView,
         hit: &Hit,
@@ -778,7 +782,7 @@ impl Mesh {
 }
 
 impl ShapeT for Mesh {
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -787,7 +791,12 @@ impl ShapeT for Mesh {
         self.triangle_interaction(store, ray, hit)
     }
 
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, _p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        _p: Vec3,
+    ) -> SurfaceInteraction<R> {
         self.triangle_point(store, hit)
     }
 
@@ -1018,7 +1027,7 @@ pub fn vertex_normals(positions: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec3> {
 /// unit face normal weighted by the corner's angle (Thürmer and Wüthrich
 /// 1998, "Computing vertex normals from polygonal facets"); zero for a
 /// degenerate face.
-fn corner_normal<R: Real>(p: [V3<R>; 3], k: usize) -> V3<R> {
+fn corner_normal<R: ScalarReal>(p: [V3<R>; 3], k: usize) -> V3<R> {
     if is_degenerate(p[0].val(), p[1].val(), p[2].val()) {
         return V3::zero();
     }

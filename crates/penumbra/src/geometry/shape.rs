@@ -2,7 +2,7 @@
 //! dispatches. Mesh plugins (`ply`, `obj`, `rectangle`, `cube`) all become
 //! [`Shape::Mesh`]; `sphere`, `disk` and `cylinder` are analytic.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::shapes::{self, Cylinder, Disk, Sphere};
@@ -18,7 +18,7 @@ pub trait ShapeT {
     /// parameterisation of a point found by a ray whose direction is a
     /// constant or a function of the parameters: camera rays, delta
     /// bounces).
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -29,7 +29,12 @@ pub trait ShapeT {
     /// point `p`), moving with the shape: the parameterisation of points
     /// sampled on a surface (Zhang et al. 2020, "Path-Space Differentiable
     /// Rendering", material form). `wi` is left zero.
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R>;
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R>;
     /// Samples a point uniformly with respect to surface area.
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample;
     /// Samples a point to light `ref_p` from (its density still per unit
@@ -156,7 +161,7 @@ impl Shape {
     /// Whether reads of this shape's surface carry derivatives in `R` (a
     /// parameter that moves it is tracked): if not, its points are
     /// constants.
-    pub fn moves<R: Real>(&self, store: &ParamView) -> bool {
+    pub fn moves<R: ScalarReal>(&self, store: &ParamView) -> bool {
         match self {
             Shape::Mesh(m) => R::tracks(store, m.positions) || R::tracks(store, m.to_world_id),
             Shape::Sphere(s) => {
@@ -173,7 +178,7 @@ impl Shape {
     /// carries derivatives in `R` (those that move it, and a mesh's vertex
     /// normals and texture coordinates): if none does, the hit can be
     /// re-evaluated in f32 and lifted as constants.
-    pub fn reads_tracked<R: Real>(&self, store: &ParamView) -> bool {
+    pub fn reads_tracked<R: ScalarReal>(&self, store: &ParamView) -> bool {
         if !R::DIFFERENTIABLE {
             return false;
         }
@@ -210,7 +215,7 @@ impl Shape {
 
 impl ShapeT for Shape {
     #[inline]
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -224,7 +229,12 @@ impl ShapeT for Shape {
         }
     }
     #[inline]
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
         match self {
             Shape::Mesh(m) => m.point_at(store, hit, p),
             Shape::Sphere(s) => s.point_at(store, hit, p),

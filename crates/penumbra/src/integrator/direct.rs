@@ -2,7 +2,7 @@
 //! the BSDF (Mitsuba's `direct`, and its `direct_projective`).
 
 use super::{mis_weight, scatter, Budgets};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::bsdf::{BsdfContextT, BsdfFlags};
 use crate::emitter::EmitterT;
 use crate::error::Result;
@@ -76,7 +76,7 @@ impl DirectIntegrator {
     /// Radiance through the camera sample `cs`, in `R`, with every vertex
     /// re-evaluated in `R` as the path integrator does, and whether the
     /// camera ray reached a surface.
-    pub fn sample<R: Real>(
+    pub fn sample<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,

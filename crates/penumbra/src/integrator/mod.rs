@@ -17,7 +17,7 @@ pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 pub use volpath::VolPathIntegrator;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
 use crate::emitter::EmitterT;
 use crate::error::Result;
@@ -175,7 +175,7 @@ impl Integrator {
     /// surfaces or the camera ([`ParamView::moves_geometry`]) the path is
     /// re-evaluated in the parameterisation of [`scatter`], otherwise
     /// nothing moves and the sampled weights are used as they are.
-    pub fn radiance<R: Real>(
+    pub fn radiance<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,
@@ -187,7 +187,7 @@ impl Integrator {
 
     /// [`Integrator::radiance`] and whether the camera ray reached a
     /// surface.
-    fn estimate<R: Real>(
+    fn estimate<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,
@@ -296,7 +296,7 @@ pub(crate) struct Bounce<R> {
 /// keeps two (the vertex and the next) in slots it reuses, rather than
 /// moving one out of the returned value at every bounce (the compiler
 /// still copies the new interaction once into the slot).
-pub(crate) fn scatter<R: Real>(
+pub(crate) fn scatter<R: ScalarReal>(
     scene: &Scene,
     store: &ParamView,
     bsdf: &BsdfContext<R>,
@@ -366,7 +366,7 @@ pub(crate) fn scatter<R: Real>(
 /// not end paths early), from depth `rr_depth` on: false if the path ends
 /// (also when nothing is left to carry); otherwise the throughput of a
 /// surviving path is divided by its survival probability.
-pub(crate) fn survives_roulette<R: Real>(
+pub(crate) fn survives_roulette<R: ScalarReal>(
     throughput: &mut Spectrum<R>,
     eta: f32,
     depth: u32,
@@ -386,7 +386,7 @@ pub(crate) struct Survival(Option<f32>);
 
 impl Survival {
     /// Divides the surviving path's throughput by its survival probability.
-    pub(crate) fn apply<R: Real>(self, throughput: &mut Spectrum<R>) {
+    pub(crate) fn apply<R: ScalarReal>(self, throughput: &mut Spectrum<R>) {
         if let Some(q) = self.0 {
             *throughput *= R::cst(1.0 / q);
         }

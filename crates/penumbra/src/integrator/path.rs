@@ -5,7 +5,7 @@
 //! serves the primal and both derivative modes).
 
 use super::{mis_weight, roulette, scatter, Budgets};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags};
 use crate::emitter::EmitterT;
 use crate::error::Result;
@@ -54,7 +54,7 @@ impl PathIntegrator {
     /// first slides along the camera ray, the next ones follow
     /// [`super::scatter`]'s parameterisation, emitter samples move with
     /// their emitter. Also returns whether the camera ray reached a surface.
-    pub fn sample<R: Real>(
+    pub fn sample<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,
@@ -75,7 +75,7 @@ impl PathIntegrator {
     /// continuing the path from there;
     /// what it reaches first counts with its whole emission (as after a
     /// delta bounce: no MIS with the vertex the ray leaves).
-    pub(crate) fn trace<R: Real>(
+    pub(crate) fn trace<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,

@@ -28,7 +28,7 @@
 //! integrator.
 
 use super::{mis_weight, survives_roulette, Budgets};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::bsdf::{Bsdf, BsdfContext, BsdfContextT, BsdfFlags};
 use crate::emitter::{DirectionSample, EmitterSample, EmitterT};
 use crate::error::Result;
@@ -86,7 +86,7 @@ impl VolPathIntegrator {
 
     /// Radiance arriving through the camera sample `cs`, estimated with one
     /// path in `R`, and whether the camera ray reached a surface.
-    pub fn sample<R: Real>(
+    pub fn sample<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,
@@ -101,7 +101,7 @@ impl VolPathIntegrator {
 
     /// The radiance arriving along `ray`, which first reaches `hit`, from
     /// a path that starts in `medium`.
-    fn trace<R: Real>(
+    fn trace<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,
@@ -284,7 +284,7 @@ impl VolPathIntegrator {
     /// `medium`: an emitter sample and the transmittance towards it
     /// (through null surfaces and media; `None` if an opaque surface is in
     /// the way).
-    fn sample_emitter<R: Real>(
+    fn sample_emitter<R: ScalarReal>(
         &self,
         scene: &Scene,
         store: &ParamView,

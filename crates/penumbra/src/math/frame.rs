@@ -1,7 +1,7 @@
 //! Orthonormal frames (shading frames): local coordinates have the normal
 //! along +z, as in pbrt and Mitsuba, so `cos θ = w.z`.
 
-use crate::ad::Real;
+use crate::ad::{Float, Real, ScalarReal};
 use crate::math::V3;
 
 /// An orthonormal basis (s, t, n).
@@ -16,8 +16,9 @@ impl<R: Real> Frame<R> {
     /// A frame around the unit normal `n`, with tangents by the branchless
     /// construction of Duff et al. 2017, "Building an Orthonormal Basis,
     /// Revisited" (JCGT 6(1)).
+    #[inline(always)]
     pub fn from_normal(n: V3<R>) -> Self {
-        let sign = if n.z.val() >= 0.0 { 1.0 } else { -1.0 };
+        let sign = R::Prim::select(n.z.val().ge(0.0), 1.0.into(), (-1.0).into());
         let a = -(n.z + sign).recip();
         let b = n.x * n.y * a;
         let s = V3::new(n.x * n.x * a * sign + 1.0, b * sign, -n.x * sign);
@@ -25,6 +26,43 @@ impl<R: Real> Frame<R> {
         Frame { s, t, n }
     }
 
+    /// Whether no axis carries a derivative.
+    #[inline(always)]
+    pub fn is_const(&self) -> bool {
+        self.s.is_const() && self.t.is_const() && self.n.is_const()
+    }
+
+    /// The primal frame.
+    #[inline(always)]
+    pub fn prim(&self) -> Frame<R::Prim> {
+        Frame {
+            s: self.s.prim(),
+            t: self.t.prim(),
+            n: self.n.prim(),
+        }
+    }
+
+    #[inline(always)]
+    pub fn to_local(&self, v: V3<R>) -> V3<R> {
+        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
+            // nothing carries a derivative (most vertices of a reverse-mode
+            // path): the same values in f32, for a fraction of the cost
+            return V3::from_prim(self.prim().to_local(v.prim()));
+        }
+        V3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
+
+    #[inline(always)]
+    pub fn to_world(&self, v: V3<R>) -> V3<R> {
+        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
+            // as in `to_local`
+            return V3::from_prim(self.prim().to_world(v.prim()));
+        }
+        self.s * v.x + self.t * v.y + self.n * v.z
+    }
+}
+
+impl<R: ScalarReal> Frame<R> {
     /// A frame around unit normal `n` whose first tangent follows `dpdu`
     /// (Gram-Schmidt), so that anisotropic BSDFs align with the surface
     /// parametrisation. Falls back to [`Frame::from_normal`] when `dpdu` is
@@ -41,41 +79,6 @@ impl<R: Real> Frame<R> {
             t: n.cross(s),
             n,
         }
-    }
-
-    /// Whether no axis carries a derivative.
-    #[inline(always)]
-    pub fn is_const(&self) -> bool {
-        self.s.is_const() && self.t.is_const() && self.n.is_const()
-    }
-
-    /// The primal frame.
-    #[inline(always)]
-    pub fn val(&self) -> Frame<f32> {
-        Frame {
-            s: V3::cst(self.s.val()),
-            t: V3::cst(self.t.val()),
-            n: V3::cst(self.n.val()),
-        }
-    }
-
-    #[inline(always)]
-    pub fn to_local(&self, v: V3<R>) -> V3<R> {
-        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
-            // nothing carries a derivative (most vertices of a reverse-mode
-            // path): the same values in f32, for a fraction of the cost
-            return V3::cst(self.val().to_local(V3::cst(v.val())).val());
-        }
-        V3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
-    }
-
-    #[inline(always)]
-    pub fn to_world(&self, v: V3<R>) -> V3<R> {
-        if R::DIFFERENTIABLE && v.is_const() && self.is_const() {
-            // as in `to_local`
-            return V3::cst(self.val().to_world(V3::cst(v.val())).val());
-        }
-        self.s * v.x + self.t * v.y + self.n * v.z
     }
 }
 

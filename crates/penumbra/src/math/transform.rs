@@ -1,6 +1,6 @@
 //! Affine and projective transforms (4×4 matrices with their inverses).
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::math::V3;
 use glam::{Mat3, Mat4, Vec3};
 
@@ -115,7 +115,7 @@ impl Transform {
     /// [`Transform::point`] for differentiable points (the matrix itself is
     /// a constant here).
     #[inline(always)]
-    pub fn point_r<R: Real>(&self, p: V3<R>) -> V3<R> {
+    pub fn point_r<R: ScalarReal>(&self, p: V3<R>) -> V3<R> {
         let c = |i: usize| self.m.col(i);
         let (c0, c1, c2, c3) = (c(0), c(1), c(2), c(3));
         let row = |k: usize| -> R { p.x * c0[k] + p.y * c1[k] + p.z * c2[k] + c3[k] };
@@ -128,13 +128,13 @@ impl Transform {
         }
     }
     #[inline(always)]
-    pub fn vector_r<R: Real>(&self, v: V3<R>) -> V3<R> {
+    pub fn vector_r<R: ScalarReal>(&self, v: V3<R>) -> V3<R> {
         let (c0, c1, c2) = (self.m.col(0), self.m.col(1), self.m.col(2));
         let row = |k: usize| -> R { v.x * c0[k] + v.y * c1[k] + v.z * c2[k] };
         V3::new(row(0), row(1), row(2))
     }
     #[inline(always)]
-    pub fn normal_r<R: Real>(&self, n: V3<R>) -> V3<R> {
+    pub fn normal_r<R: ScalarReal>(&self, n: V3<R>) -> V3<R> {
         // (inv^T n)_k = column k of inv, dotted with n
         let c = |k: usize| -> R {
             let ck = self.inv.col(k);

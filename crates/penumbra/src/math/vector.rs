@@ -1,7 +1,7 @@
 //! Small vectors generic over the number type, for differentiable code.
 //! Traversal and sampling use glam's f32 types; conversions are provided.
 
-use crate::ad::Real;
+use crate::ad::{Float, Real, ScalarReal};
 use glam::{Vec2, Vec3};
 use std::ops::{Add, AddAssign, Div, Index, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -38,10 +38,24 @@ impl<R: Real> V3<R> {
     pub fn cst(v: Vec3) -> Self {
         V3::new(R::cst(v.x), R::cst(v.y), R::cst(v.z))
     }
-    /// The primal value as a glam vector.
+    /// A constant per lane (a detached sample).
     #[inline(always)]
-    pub fn val(self) -> Vec3 {
-        Vec3::new(self.x.val(), self.y.val(), self.z.val())
+    pub fn from_prim(v: V3<R::Prim>) -> Self {
+        V3::new(R::from_prim(v.x), R::from_prim(v.y), R::from_prim(v.z))
+    }
+    /// The primal value.
+    #[inline(always)]
+    pub fn prim(self) -> V3<R::Prim> {
+        V3::new(self.x.val(), self.y.val(), self.z.val())
+    }
+    /// `a` in the lanes where `m` holds, `b` elsewhere.
+    #[inline(always)]
+    pub fn select(m: R::Mask, a: Self, b: Self) -> Self {
+        V3::new(
+            R::select(m, a.x, b.x),
+            R::select(m, a.y, b.y),
+            R::select(m, a.z, b.z),
+        )
     }
     /// Whether no component carries a derivative.
     #[inline(always)]
@@ -80,7 +94,7 @@ impl<R: Real> V3<R> {
     /// Component-wise quotient (colours); a zero divisor gives zero.
     #[inline(always)]
     pub fn div_elem(self, o: Self) -> Self {
-        let d = |a: R, b: R| if b.val() != 0.0 { a / b } else { R::cst(0.0) };
+        let d = |a: R, b: R| R::select(b.val().equals(0.0), R::cst(0.0), a / b);
         V3::new(d(self.x, o.x), d(self.y, o.y), d(self.z, o.z))
     }
     #[inline(always)]
@@ -101,13 +115,10 @@ impl<R: Real> V3<R> {
     pub fn luminance(self) -> R {
         self.x * 0.212671 + self.y * 0.715160 + self.z * 0.072169
     }
+    /// Where all three components are zero.
     #[inline(always)]
-    pub fn is_zero(self) -> bool {
-        self.x.val() == 0.0 && self.y.val() == 0.0 && self.z.val() == 0.0
-    }
-    #[inline(always)]
-    pub fn is_finite(self) -> bool {
-        self.x.is_finite() && self.y.is_finite() && self.z.is_finite()
+    pub fn is_zero(self) -> R::Mask {
+        self.x.val().equals(0.0) & self.y.val().equals(0.0) & self.z.val().equals(0.0)
     }
     /// Scales by a constant (`v * s` with `s: R` is the operator form).
     #[inline(always)]
@@ -124,6 +135,18 @@ impl<R: Real> V3<R> {
     }
 }
 
+impl<R: ScalarReal> V3<R> {
+    /// The primal value as a glam vector.
+    #[inline(always)]
+    pub fn val(self) -> Vec3 {
+        Vec3::new(self.x.val(), self.y.val(), self.z.val())
+    }
+    #[inline(always)]
+    pub fn is_finite(self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.z.is_finite()
+    }
+}
+
 impl<R: Real> V2<R> {
     #[inline(always)]
     pub fn new(x: R, y: R) -> Self {
@@ -137,6 +160,13 @@ impl<R: Real> V2<R> {
     pub fn zero() -> Self {
         V2::new(R::cst(0.0), R::cst(0.0))
     }
+    #[inline(always)]
+    pub fn from_prim(v: V2<R::Prim>) -> Self {
+        V2::new(R::from_prim(v.x), R::from_prim(v.y))
+    }
+}
+
+impl<R: ScalarReal> V2<R> {
     #[inline(always)]
     pub fn val(self) -> Vec2 {
         Vec2::new(self.x.val(), self.y.val())
@@ -236,6 +266,27 @@ impl From<Vec3> for V3<f32> {
     #[inline(always)]
     fn from(v: Vec3) -> Self {
         V3::new(v.x, v.y, v.z)
+    }
+}
+
+impl From<V3<f32>> for Vec3 {
+    #[inline(always)]
+    fn from(v: V3<f32>) -> Self {
+        Vec3::new(v.x, v.y, v.z)
+    }
+}
+
+impl From<Vec2> for V2<f32> {
+    #[inline(always)]
+    fn from(v: Vec2) -> Self {
+        V2::new(v.x, v.y)
+    }
+}
+
+impl From<V2<f32>> for Vec2 {
+    #[inline(always)]
+    fn from(v: V2<f32>) -> Self {
+        Vec2::new(v.x, v.y)
     }
 }
 

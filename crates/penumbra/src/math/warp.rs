@@ -1,29 +1,34 @@
 //! Warps from the unit square to common domains, each with its density.
-//! Sampling is plain f32: sampled points are constants for differentiation
-//! (detached sampling, docs/architecture.md §1).
+//! Sampling is primal: sampled points are constants for differentiation
+//! (detached sampling, docs/architecture.md §1), computed in `f32` or, for
+//! the warps written over [`Float`], in lanes.
 
+use crate::ad::Float;
+use crate::math::{V2, V3};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
 
 /// Shirley–Chiu concentric map from the square to the unit disk
 /// (area-preserving, low distortion).
-#[inline]
-pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
-    let x = 2.0 * u.x - 1.0;
-    let y = 2.0 * u.y - 1.0;
-    if x == 0.0 && y == 0.0 {
-        return Vec2::ZERO;
-    }
+#[inline(always)]
+pub fn square_to_uniform_disk_concentric<F: Float>(u: V2<F>) -> V2<F> {
+    let x = u.x * 2.0 - 1.0;
+    let y = u.y * 2.0 - 1.0;
     // Which of |x|, |y| is larger is a coin flip per sample: one division
-    // and selects instead of two branches the processor cannot predict
-    // (the same values as branching).
-    let wide = x.abs() > y.abs();
-    let (r, other) = if wide { (x, y) } else { (y, x) };
+    // and selects instead of two branches the processor cannot predict.
+    let wide = x.abs().gt(y.abs());
+    let (r, other) = (F::select(wide, x, y), F::select(wide, y, x));
     // φ = q when |x| is larger, π/2 − q otherwise, and cos(π/2 − q) =
     // sin q: one sine and cosine of |q| ≤ π/4, by polynomial
-    let (sin_q, cos_q) = sin_cos_quarter(FRAC_PI_4 * (other / r));
-    let (c, s) = if wide { (cos_q, sin_q) } else { (sin_q, cos_q) };
-    Vec2::new(r * c, r * s)
+    let (sin_q, cos_q) = sin_cos_quarter(other / r * FRAC_PI_4);
+    let (c, s) = (F::select(wide, cos_q, sin_q), F::select(wide, sin_q, cos_q));
+    // the centre (where other / r is 0 / 0)
+    let centre = x.equals(0.0) & y.equals(0.0);
+    let zero = F::cst(0.0);
+    V2::new(
+        F::select(centre, zero, r * c),
+        F::select(centre, zero, r * s),
+    )
 }
 
 /// Sine and cosine of 2πu for u in [0, 1] (an angle in turns, as the
@@ -50,28 +55,26 @@ pub fn sin_cos_turns(u: f32) -> (f32, f32) {
 /// instead of a call to libm's `sincosf`, on the path of every diffuse
 /// bounce.
 #[inline(always)]
-fn sin_cos_quarter(x: f32) -> (f32, f32) {
+fn sin_cos_quarter<F: Float>(x: F) -> (F, F) {
     let z = x * x;
-    let sin = ((-1.951_529_6e-4 * z + 8.332_161e-3) * z - 1.666_665_5e-1) * z * x + x;
-    let cos = ((2.443_315_7e-5 * z - 1.388_731_6e-3) * z + 4.166_664_6e-2) * z * z - 0.5 * z + 1.0;
+    let sin = ((z * -1.951_529_6e-4 + 8.332_161e-3) * z - 1.666_665_5e-1) * z * x + x;
+    let cos = ((z * 2.443_315_7e-5 - 1.388_731_6e-3) * z + 4.166_664_6e-2) * z * z - z * 0.5 + 1.0;
     (sin, cos)
 }
 
 /// Cosine-weighted hemisphere around +z (Malley's method).
-#[inline]
-pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
+#[inline(always)]
+pub fn square_to_cosine_hemisphere<F: Float>(u: V2<F>) -> V3<F> {
     let d = square_to_uniform_disk_concentric(u);
-    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
-    Vec3::new(d.x, d.y, z)
+    let z = (F::cst(1.0) - (d.x * d.x + d.y * d.y))
+        .max(F::cst(0.0))
+        .sqrt();
+    V3::new(d.x, d.y, z)
 }
 
-#[inline]
-pub fn square_to_cosine_hemisphere_pdf(v: Vec3) -> f32 {
-    if v.z > 0.0 {
-        v.z * FRAC_1_PI
-    } else {
-        0.0
-    }
+#[inline(always)]
+pub fn square_to_cosine_hemisphere_pdf<F: Float>(v: V3<F>) -> F {
+    F::select(v.z.gt(0.0), v.z * FRAC_1_PI, F::cst(0.0))
 }
 
 #[inline]
@@ -147,6 +150,48 @@ mod tests {
         })
     }
 
+    /// The warps written over `Float` give, in 8 and 16 lanes, each lane's
+    /// `f32` value bit for bit (the centre and the diagonals included).
+    #[test]
+    fn lane_warps_equal_the_scalar_ones() {
+        use crate::ad::lanes::Lanes;
+        fn check<const N: usize>(us: &[Vec2]) {
+            for chunk in us.chunks(N) {
+                let lane = |i: usize, f: fn(Vec2) -> f32| f(chunk[i.min(chunk.len() - 1)]);
+                let u = V2::new(
+                    Lanes::<N>::from_fn(|i| lane(i, |v| v.x)),
+                    Lanes::from_fn(|i| lane(i, |v| v.y)),
+                );
+                let d = square_to_uniform_disk_concentric(u);
+                let h = square_to_cosine_hemisphere(u);
+                let p = square_to_cosine_hemisphere_pdf(V3::new(h.x, h.y, h.z - 0.5));
+                for (i, &c) in chunk.iter().enumerate() {
+                    let ui = V2::from(c);
+                    let (ds, hs) = (
+                        square_to_uniform_disk_concentric(ui),
+                        square_to_cosine_hemisphere(ui),
+                    );
+                    let ps = square_to_cosine_hemisphere_pdf(V3::new(hs.x, hs.y, hs.z - 0.5));
+                    let lanes = [d.x.0[i], d.y.0[i], h.x.0[i], h.y.0[i], h.z.0[i], p.0[i]];
+                    let scalar = [ds.x, ds.y, hs.x, hs.y, hs.z, ps];
+                    for (a, b) in lanes.iter().zip(scalar) {
+                        assert_eq!(a.to_bits(), b.to_bits(), "u = {c:?}");
+                    }
+                }
+            }
+        }
+        let mut us: Vec<Vec2> = grid(37).collect();
+        us.extend([
+            Vec2::splat(0.5),
+            Vec2::ZERO,
+            Vec2::ONE,
+            Vec2::new(0.25, 0.25),
+            Vec2::new(0.5, 0.9),
+        ]);
+        check::<8>(&us);
+        check::<16>(&us);
+    }
+
     /// The polynomial sine and cosine against f64 on a dense grid of
     /// [−π/4, π/4]: within 2 ulp of the exact value (relative to the
     /// larger of the value and the smallest normal, as near zero the sine
@@ -190,7 +235,7 @@ mod tests {
     #[test]
     fn concentric_disk_matches_its_definition() {
         for u in grid(300) {
-            let d = square_to_uniform_disk_concentric(u);
+            let d = Vec2::from(square_to_uniform_disk_concentric(u.into()));
             let (x, y) = (2.0 * u.x as f64 - 1.0, 2.0 * u.y as f64 - 1.0);
             let (r, phi) = if x.abs() > y.abs() {
                 (x, std::f64::consts::FRAC_PI_4 * (y / x))
@@ -211,8 +256,8 @@ mod tests {
     #[test]
     fn warps_land_in_their_domains() {
         for u in grid(64) {
-            assert!(square_to_uniform_disk_concentric(u).length() <= 1.0 + 1e-6);
-            let c = square_to_cosine_hemisphere(u);
+            assert!(Vec2::from(square_to_uniform_disk_concentric(u.into())).length() <= 1.0 + 1e-6);
+            let c = Vec3::from(square_to_cosine_hemisphere(u.into()));
             assert!((c.length() - 1.0).abs() < 1e-5 && c.z >= 0.0);
             assert!((square_to_uniform_sphere(u).length() - 1.0).abs() < 1e-5);
             let k = square_to_uniform_cone(u, 0.8);
@@ -228,7 +273,7 @@ mod tests {
     fn cosine_pdf_integrates_to_one() {
         let n = 512;
         let sum: f64 = grid(n)
-            .map(|u| square_to_cosine_hemisphere_pdf(square_to_uniform_sphere(u)) as f64)
+            .map(|u| square_to_cosine_hemisphere_pdf(square_to_uniform_sphere(u).into()) as f64)
             .sum();
         let integral = sum / (n * n) as f64 / UNIFORM_SPHERE_PDF as f64;
         assert!((integral - 1.0).abs() < 1e-3, "{integral}");

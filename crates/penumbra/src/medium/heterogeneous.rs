@@ -49,7 +49,7 @@
 //! everywhere has no majorant at all and gets no gradient.
 
 use super::{FreeFlight, Medium};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::geometry::Ray;
 use crate::math::Spectrum;
 use crate::params::ParamView;
@@ -74,7 +74,7 @@ fn optical_depth(rng: &mut SampleStream) -> f32 {
 /// 1 with no derivative (a grey extinction that carries none), so that it
 /// need not be multiplied in.
 #[inline]
-fn null_is_one<R: Real>(sigma_t: Spectrum<R>) -> bool {
+fn null_is_one<R: ScalarReal>(sigma_t: Spectrum<R>) -> bool {
     let s = sigma_t.val();
     s.min_element() == s.max_element()
         && sigma_t.x.is_const()
@@ -82,7 +82,7 @@ fn null_is_one<R: Real>(sigma_t: Spectrum<R>) -> bool {
         && sigma_t.z.is_const()
 }
 
-pub(super) fn sample_free_flight<R: Real>(
+pub(super) fn sample_free_flight<R: ScalarReal>(
     medium: &Medium,
     store: &ParamView,
     ray: &Ray,
@@ -135,7 +135,7 @@ pub(super) fn sample_free_flight<R: Real>(
     }
 }
 
-pub(super) fn transmittance<R: Real>(
+pub(super) fn transmittance<R: ScalarReal>(
     medium: &Medium,
     store: &ParamView,
     ray: &Ray,

@@ -10,7 +10,7 @@
 //! expectation of any tracking estimator, without its variance.
 
 use super::{FreeFlight, Medium};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Ray;
 use crate::math::{Spectrum, V3};
@@ -38,7 +38,7 @@ pub(super) fn check_constant(node: &Node) -> Result<()> {
 /// e^{-σ t} per channel, in `R`; at t = ∞, 1 where σ = 0 and 0 elsewhere
 /// (a ray that leaves the scene inside a medium).
 #[inline]
-fn attenuation<R: Real>(sigma_t: Spectrum<R>, t: f32) -> Spectrum<R> {
+fn attenuation<R: ScalarReal>(sigma_t: Spectrum<R>, t: f32) -> Spectrum<R> {
     sigma_t.map(|s| {
         if t.is_finite() {
             (-(s * t)).exp()
@@ -48,7 +48,7 @@ fn attenuation<R: Real>(sigma_t: Spectrum<R>, t: f32) -> Spectrum<R> {
     })
 }
 
-pub(super) fn sample_free_flight<R: Real>(
+pub(super) fn sample_free_flight<R: ScalarReal>(
     m: &Medium,
     store: &ParamView,
     ray: &Ray,
@@ -76,7 +76,7 @@ pub(super) fn sample_free_flight<R: Real>(
     }
 }
 
-pub(super) fn transmittance<R: Real>(
+pub(super) fn transmittance<R: ScalarReal>(
     m: &Medium,
     store: &ParamView,
     ray: &Ray,

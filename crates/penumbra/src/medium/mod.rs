@@ -21,7 +21,7 @@ mod heterogeneous;
 mod homogeneous;
 mod majorant;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::Ray;
 use crate::math::{Spectrum, V3};
@@ -160,7 +160,7 @@ impl Medium {
     /// σ_t at `p`, in `R`; one number on all channels for a one-channel
     /// extinction (one product, one tape node in reverse mode).
     #[inline]
-    fn extinction<R: Real>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
+    fn extinction<R: ScalarReal>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
         let scale: R = store.read(self.scale, 0);
         let s = self.sigma_t.eval::<R>(store, p);
         if self.sigma_t.is_mono() {
@@ -172,7 +172,11 @@ impl Medium {
 
     /// σ_t and α at `p`, in `R`.
     #[inline]
-    fn coefficients<R: Real>(&self, store: &ParamView, p: Vec3) -> (Spectrum<R>, Spectrum<R>) {
+    fn coefficients<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        p: Vec3,
+    ) -> (Spectrum<R>, Spectrum<R>) {
         (self.extinction(store, p), self.albedo.eval(store, p))
     }
 
@@ -214,7 +218,7 @@ impl Medium {
     /// Samples where a path travelling along `ray` (unit direction) in
     /// this medium scatters before distance `t_max` (the next surface, or
     /// infinity), consuming random numbers from `rng`.
-    pub fn sample_free_flight<R: Real>(
+    pub fn sample_free_flight<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &Ray,
@@ -233,7 +237,7 @@ impl Medium {
 
     /// An estimate of the transmittance along `ray` (unit direction) from
     /// 0 to `t_max`, in `R`.
-    pub fn transmittance<R: Real>(
+    pub fn transmittance<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &Ray,
@@ -248,7 +252,7 @@ impl Medium {
 
     /// The phase function's value for scattering from `wi` to `wo`.
     #[inline]
-    pub fn phase_eval<R: Real>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
+    pub fn phase_eval<R: ScalarReal>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
         self.phase.eval(store, wi, wo)
     }
 }

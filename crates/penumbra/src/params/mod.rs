@@ -2,12 +2,12 @@
 //! flat, named f32 buffer, keyed like Mitsuba's `traverse()` keys
 //! (`"red.reflectance.value"`, `"plane.bsdf.reflectance.data"`,
 //! `"obj.vertex_positions"`). Components keep [`ParamId`]s and read values
-//! as `R: Real` through a [`ParamView`]: the scene's values together with
+//! as `R: ScalarReal` through a [`ParamView`]: the scene's values together with
 //! the [`Seeds`] of one derivative call (tangents in forward mode, the
 //! recorded parameters in reverse mode), so that seeding and tagging happen
 //! in one place and the derivative state never lives in the scene.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Error;
 use crate::geometry::mesh::AttributeParam;
 use crate::math::{V2, V3};
@@ -482,13 +482,13 @@ impl<'a> ParamView<'a> {
     /// Element `i` of parameter `id` as `R` (seeded or tagged for
     /// differentiation according to `R`).
     #[inline(always)]
-    pub fn read<R: Real>(&self, id: ParamId, i: usize) -> R {
+    pub fn read<R: ScalarReal>(&self, id: ParamId, i: usize) -> R {
         R::from_param(self, id, i)
     }
 
     /// Elements `3i, 3i+1, 3i+2` as a vector (RGB values, positions).
     #[inline(always)]
-    pub fn read3<R: Real>(&self, id: ParamId, i: usize) -> V3<R> {
+    pub fn read3<R: ScalarReal>(&self, id: ParamId, i: usize) -> V3<R> {
         if !R::DIFFERENTIABLE {
             // one look-up of the parameter and one bounds check, not three
             let v = &self.store.data(id)[3 * i..3 * i + 3];
@@ -503,7 +503,7 @@ impl<'a> ParamView<'a> {
 
     /// Elements `2i, 2i+1` as a vector (texture coordinates).
     #[inline(always)]
-    pub fn read2<R: Real>(&self, id: ParamId, i: usize) -> V2<R> {
+    pub fn read2<R: ScalarReal>(&self, id: ParamId, i: usize) -> V2<R> {
         if !R::DIFFERENTIABLE {
             let v = &self.store.data(id)[2 * i..2 * i + 2];
             return V2::new(R::cst(v[0]), R::cst(v[1]));

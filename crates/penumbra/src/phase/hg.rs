@@ -2,7 +2,7 @@
 //! Mitsuba's `hg`), parameterised by its mean cosine g ∈ (-1, 1): g > 0
 //! scatters forward, g < 0 backward, g = 0 is isotropic.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::math::{Frame, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
@@ -42,7 +42,7 @@ impl HenyeyGreenstein {
     /// (1 − g²) / (4π (1 + g² + 2g ⟨wi, wo⟩)^{3/2}): with `wi` pointing
     /// back along the incoming ray, ⟨wi, wo⟩ = −cos θ of the deflection.
     #[inline]
-    pub fn eval<R: Real>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
+    pub fn eval<R: ScalarReal>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
         let g: R = store.read(self.g, 0);
         let cos = wo.dot(V3::cst(wi));
         let denom = R::cst(1.0) + g * g + g * cos * 2.0;

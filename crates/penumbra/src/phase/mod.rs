@@ -11,7 +11,7 @@ mod isotropic;
 
 pub use hg::HenyeyGreenstein;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::math::V3;
 use crate::params::{ParamStore, ParamView};
@@ -45,7 +45,7 @@ impl PhaseFunction {
     /// The phase function's value (= its sampling density, per steradian)
     /// for scattering from `wi` to `wo`, in `R`.
     #[inline]
-    pub fn eval<R: Real>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
+    pub fn eval<R: ScalarReal>(&self, store: &ParamView, wi: Vec3, wo: V3<R>) -> R {
         match self {
             PhaseFunction::Isotropic => R::cst(isotropic::DENSITY),
             PhaseFunction::HenyeyGreenstein(p) => p.eval(store, wi, wo),

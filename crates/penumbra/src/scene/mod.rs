@@ -15,7 +15,7 @@ use crate::params::{ParamStore, ParamView};
 
 mod build;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::bsdf::{Bsdf, BsdfFlags};
 use crate::emitter::{Emitter, EmitterSample, EmitterT};
 use crate::geometry::accel::Accel;
@@ -153,7 +153,7 @@ impl Scene {
     /// Re-evaluates a hit in `R`, the point sliding along `ray` (see
     /// [`ShapeT::surface_interaction`]).
     #[inline]
-    pub fn surface_interaction<R: Real>(
+    pub fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -184,7 +184,7 @@ impl Scene {
     /// [`Scene::surface_interaction`] of a hit of `shape`, directly or
     /// through the instance that was hit.
     #[inline(always)]
-    fn hit_interaction<R: Real>(
+    fn hit_interaction<R: ScalarReal>(
         &self,
         shape: &Shape,
         store: &ParamView,
@@ -200,7 +200,7 @@ impl Scene {
     /// Re-evaluates a hit in `R` as a point that moves with its shape (see
     /// [`ShapeT::point_at`]); `p` is the primal hit point.
     #[inline]
-    pub fn point_at<R: Real>(
+    pub fn point_at<R: ScalarReal>(
         &self,
         store: &ParamView,
         hit: &Hit,
@@ -215,7 +215,7 @@ impl Scene {
 
     /// [`Scene::point_at`] of `shape`, directly or through its instance.
     #[inline(always)]
-    fn point_interaction<R: Real>(
+    fn point_interaction<R: ScalarReal>(
         &self,
         shape: &Shape,
         store: &ParamView,
@@ -254,7 +254,7 @@ impl Scene {
     /// it from `ref_p`, without testing visibility. Returns the sample with
     /// its weight `radiance / pdf` and density including the selection
     /// probability, in `R` following `ref_p` and the emitter.
-    pub fn sample_emitter<R: Real>(
+    pub fn sample_emitter<R: ScalarReal>(
         &self,
         store: &ParamView,
         ref_p: V3<R>,
@@ -277,7 +277,7 @@ impl Scene {
     /// the BSDF's value for the sample's direction, and only where that is
     /// nonzero: a light behind a reflecting surface (half the directions
     /// of an environment's uniform samples) needs no traversal.
-    pub fn emitter_visible<R: Real>(
+    pub fn emitter_visible<R: ScalarReal>(
         &self,
         si: &SurfaceInteraction<R>,
         es: &EmitterSample<R>,

@@ -11,7 +11,7 @@ pub use orthographic::Orthographic;
 pub use perspective::Perspective;
 pub use thinlens::ThinLens;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::DiffRay;
 use crate::image::{Film, ReconstructionFilter};
@@ -46,7 +46,7 @@ impl CameraSample<'_> {
     /// The camera ray in `R` if geometry or the camera moves, else its
     /// primal value as a constant (cheaper: nothing to differentiate).
     #[inline]
-    pub fn ray_if_moving<R: Real>(&self, store: &ParamView) -> DiffRay<R> {
+    pub fn ray_if_moving<R: ScalarReal>(&self, store: &ParamView) -> DiffRay<R> {
         if store.moves_geometry() {
             self.ray(store)
         } else {
@@ -56,7 +56,7 @@ impl CameraSample<'_> {
 
     /// The camera ray of this sample, in `R`.
     #[inline]
-    pub fn ray<R: Real>(&self, store: &ParamView) -> DiffRay<R> {
+    pub fn ray<R: ScalarReal>(&self, store: &ParamView) -> DiffRay<R> {
         self.sensor.ray(store, self.film, self.lens)
     }
 }
@@ -106,7 +106,7 @@ enum Pose {
 /// A sensor's `to_world` in `R`, row-major.
 pub(crate) struct ToWorld<R>([R; 16]);
 
-impl<R: Real> ToWorld<R> {
+impl<R: ScalarReal> ToWorld<R> {
     fn read(pose: &Pose, store: &ParamView) -> Self {
         ToWorld(match pose {
             Pose::Param(id) => std::array::from_fn(|i| store.read(*id, i)),
@@ -236,7 +236,7 @@ impl Sensor {
     /// `tan(x_fov / 2)` and the principal point offset in `R` (zero for an
     /// orthographic camera).
     #[inline(always)]
-    fn read_lens<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
+    fn read_lens<R: ScalarReal>(&self, store: &ParamView) -> (R, [R; 2]) {
         match &self.camera {
             Camera::Perspective(c) => c.frustum.read(store),
             Camera::ThinLens(c) => c.frustum.read(store),
@@ -250,7 +250,7 @@ impl Sensor {
     /// In f32 the values refreshed by the last update are used (the same
     /// numbers, without reading them again per ray).
     #[inline]
-    pub fn ray<R: Real>(&self, store: &ParamView, film: Vec2, lens: Vec2) -> DiffRay<R> {
+    pub fn ray<R: ScalarReal>(&self, store: &ParamView, film: Vec2, lens: Vec2) -> DiffRay<R> {
         let (to_world, lens_params) = if R::DIFFERENTIABLE {
             (ToWorld::read(&self.pose, store), self.read_lens(store))
         } else {
@@ -437,7 +437,7 @@ impl Frustum {
 
     /// `tan(x_fov / 2)` and the principal point offset, in `R`.
     #[inline(always)]
-    pub(crate) fn read<R: Real>(&self, store: &ParamView) -> (R, [R; 2]) {
+    pub(crate) fn read<R: ScalarReal>(&self, store: &ParamView) -> (R, [R; 2]) {
         // `to_radians` spelled out, as the same f32 operations
         let tan_x = (store.read::<R>(self.x_fov, 0) * (std::f32::consts::PI / 180.0) * 0.5).tan();
         let offset = match self.principal_point_offset {
@@ -466,7 +466,7 @@ impl Frustum {
     /// `lens` is `(tan(x_fov / 2), principal point offset)` as
     /// [`Frustum::read`] gives them.
     #[inline(always)]
-    fn direction<R: Real>(&self, (tan_x, [ox, oy]): (R, [R; 2]), pos: Vec2) -> V3<R> {
+    fn direction<R: ScalarReal>(&self, (tan_x, [ox, oy]): (R, [R; 2]), pos: Vec2) -> V3<R> {
         let x = (R::cst(1.0 - 2.0 * pos.x) - ox * 2.0) * tan_x;
         let y = (R::cst(1.0 - 2.0 * pos.y) - oy * 2.0) * tan_x / self.aspect;
         V3::new(x, y, R::cst(1.0))

@@ -4,7 +4,7 @@
 //! Parameter: `<key>.to_world`.
 
 use super::{clip_range, ToWorld};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::math::V3;
@@ -25,7 +25,7 @@ impl Orthographic {
     }
 
     #[inline]
-    pub(crate) fn ray<R: Real>(&self, to_world: &ToWorld<R>, pos: Vec2) -> DiffRay<R> {
+    pub(crate) fn ray<R: ScalarReal>(&self, to_world: &ToWorld<R>, pos: Vec2) -> DiffRay<R> {
         let local = Vec3::new(1.0 - 2.0 * pos.x, (1.0 - 2.0 * pos.y) / self.aspect, 0.0);
         let d = to_world.vector(V3::cst(Vec3::Z));
         // the clip range scales with to_world's z axis

@@ -4,7 +4,7 @@
 //! `<key>.principal_point_offset_x`, `<key>.principal_point_offset_y`.
 
 use super::{Frustum, ToWorld};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::params::ParamStore;
@@ -27,7 +27,7 @@ impl Perspective {
     }
 
     #[inline]
-    pub(crate) fn ray<R: Real>(
+    pub(crate) fn ray<R: ScalarReal>(
         &self,
         to_world: &ToWorld<R>,
         lens: (R, [R; 2]),

@@ -5,7 +5,7 @@
 //! disk of the film: it has no single image point).
 
 use super::{Camera, Sensor, ToWorld};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::geometry::edges::Eye;
 use crate::math::{V2, V3};
 use crate::params::ParamView;
@@ -39,7 +39,7 @@ enum Kind<R> {
 
 impl Sensor {
     /// The projection of this sensor in `R`, or `None` for a thin lens.
-    pub(crate) fn projector<R: Real>(&self, store: &ParamView) -> Option<Projector<R>> {
+    pub(crate) fn projector<R: ScalarReal>(&self, store: &ParamView) -> Option<Projector<R>> {
         let to_world = ToWorld::read(&self.pose, store);
         let (kind, near) = match &self.camera {
             Camera::Perspective(c) => {
@@ -66,7 +66,7 @@ impl Sensor {
     }
 }
 
-impl<R: Real> Projector<R> {
+impl<R: ScalarReal> Projector<R> {
     /// Camera-space coordinates of the world point `p`: `to_world⁻¹ p`
     /// for the affine `to_world` (its last row is taken as (0, 0, 0, 1), as
     /// for every camera pose Mitsuba accepts), the inverse of the linear

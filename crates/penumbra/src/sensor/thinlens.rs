@@ -6,7 +6,7 @@
 //! principal point offset.
 
 use super::{add_scalar, Frustum, ToWorld};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::DiffRay;
 use crate::math::{warp, V3};
@@ -53,7 +53,7 @@ impl ThinLens {
     /// Rays from a point on the lens through the point of the focal plane
     /// that the pinhole ray through `pos` reaches.
     #[inline]
-    pub(crate) fn ray<R: Real>(
+    pub(crate) fn ray<R: ScalarReal>(
         &self,
         store: &ParamView,
         to_world: &ToWorld<R>,
@@ -64,7 +64,7 @@ impl ThinLens {
         // d.z == 1
         let focus =
             self.frustum.direction::<R>(lens_params, pos) * store.read::<R>(self.focus_distance, 0);
-        let l = warp::square_to_uniform_disk_concentric(lens);
+        let l = Vec2::from(warp::square_to_uniform_disk_concentric(lens.into()));
         let r = store.read::<R>(self.aperture_radius, 0);
         let o = V3::new(r * l.x, r * l.y, R::cst(0.0));
         let dir = (focus - o).normalize();

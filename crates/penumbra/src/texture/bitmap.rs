@@ -2,7 +2,7 @@
 //! surface uv with bilinear or nearest filtering.
 
 use super::TextureT;
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
@@ -59,7 +59,7 @@ impl WrapMode {
 /// Reads a `to_uv` transform parameter (3×3 affine, row-major, stored as
 /// `<key>.to_uv`) and applies it to `uv`.
 #[inline]
-pub(crate) fn apply_to_uv<R: Real>(store: &ParamView, id: ParamId, uv: V2<R>) -> V2<R> {
+pub(crate) fn apply_to_uv<R: ScalarReal>(store: &ParamView, id: ParamId, uv: V2<R>) -> V2<R> {
     // one look-up of the parameter and one bounds check for its two rows
     let m = &store.data(id)[..6];
     V2::new(
@@ -221,7 +221,7 @@ impl Bitmap {
 
     /// Texel (x, y) (already wrapped) as RGB, read through the store.
     #[inline]
-    fn texel<R: Real>(&self, store: &ParamView, x: usize, y: usize) -> Spectrum<R> {
+    fn texel<R: ScalarReal>(&self, store: &ParamView, x: usize, y: usize) -> Spectrum<R> {
         let i = y * self.width + x;
         if self.channels == 3 {
             store.read3(self.data, i)
@@ -231,7 +231,7 @@ impl Bitmap {
     }
 
     /// The filtered value at texture coordinates `uv` (after `to_uv`).
-    pub fn lookup<R: Real>(&self, store: &ParamView, uv: V2<R>) -> Spectrum<R> {
+    pub fn lookup<R: ScalarReal>(&self, store: &ParamView, uv: V2<R>) -> Spectrum<R> {
         if !R::DIFFERENTIABLE {
             return V3::cst(self.lookup_primal(store.data(self.data), uv.val()));
         }
@@ -319,7 +319,7 @@ impl Bitmap {
     /// The texel columns and rows `[x0, x1, y0, y1]` (wrapped) between
     /// whose centres `uv` lies, and its fractional position `(fx, fy)`
     /// from the (x0, y0) centre: texel centres at integer coordinates.
-    fn bilinear_taps<R: Real>(&self, uv: V2<R>) -> ([usize; 4], R, R) {
+    fn bilinear_taps<R: ScalarReal>(&self, uv: V2<R>) -> ([usize; 4], R, R) {
         let (w, h) = (self.width, self.height);
         let x = uv.x * w as f32 - 0.5;
         let y = uv.y * h as f32 - 0.5;
@@ -342,7 +342,11 @@ impl Bitmap {
     /// by the resolution (the chain rule exactly when `to_uv` does not mix
     /// u and v or the image is square). Zero for nearest filtering, whose
     /// value is piecewise constant.
-    pub fn eval_1_grad<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> V2<R> {
+    pub fn eval_1_grad<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        si: &SurfaceInteraction<R>,
+    ) -> V2<R> {
         if self.filter == FilterType::Nearest {
             return V2::zero();
         }
@@ -369,12 +373,12 @@ impl Bitmap {
 }
 
 impl TextureT for Bitmap {
-    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.lookup(store, apply_to_uv(store, self.to_uv, si.uv))
     }
     /// The value (monochrome data) or its luminance (RGB data), as
     /// Mitsuba 3's bitmap `eval_1`.
-    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         let v = self.eval(store, si);
         if self.channels == 3 {
             v.luminance()

@@ -3,7 +3,7 @@
 
 use super::bitmap::{add_to_uv, apply_to_uv};
 use super::{Channels, Texture, TextureT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{floor_i64, Spectrum};
@@ -51,7 +51,7 @@ impl Checkerboard {
 
     /// True where `color0` applies.
     #[inline]
-    fn is_color0<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> bool {
+    fn is_color0<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> bool {
         let uv = apply_to_uv(store, self.to_uv, si.uv).val();
         let (fu, fv) = (uv.x - floor_i64(uv.x) as f32, uv.y - floor_i64(uv.y) as f32);
         (fu > 0.5) == (fv > 0.5)
@@ -59,7 +59,7 @@ impl Checkerboard {
 }
 
 impl TextureT for Checkerboard {
-    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         #[cfg(test)]
         EVALS.with(|n| n.set(n.get() + 1));
         if self.is_color0(store, si) {
@@ -68,7 +68,7 @@ impl TextureT for Checkerboard {
             self.color1.eval(store, si)
         }
     }
-    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         #[cfg(test)]
         EVALS.with(|n| n.set(n.get() + 1));
         if self.is_color0(store, si) != MITSUBA_EVAL1_SWAPS_COLORS {

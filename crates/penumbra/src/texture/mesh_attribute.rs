@@ -3,7 +3,7 @@
 //! times `scale`.
 
 use super::TextureT;
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result, SrcLoc};
 use crate::geometry::mesh::AttributeParam;
 use crate::geometry::{Shape, SurfaceInteraction};
@@ -86,7 +86,7 @@ impl MeshAttribute {
 
     /// Channel `c` of attribute `a` at the hit.
     #[inline]
-    fn channel<R: Real>(
+    fn channel<R: ScalarReal>(
         store: &ParamView,
         a: &AttributeParam,
         si: &SurfaceInteraction<R>,
@@ -118,7 +118,7 @@ impl TextureT for MeshAttribute {
     /// A 1-channel attribute is grey, as in Mitsuba. A shape without the
     /// attribute (refused at load) would give black.
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         let Some(a) = store.shape_attribute(si.shape, &self.name) else {
             return V3::zero();
         };
@@ -136,7 +136,7 @@ impl TextureT for MeshAttribute {
     /// The mean of an RGB attribute (Mitsuba refuses `eval_1` on one), as
     /// the other textures do.
     #[inline]
-    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         let Some(a) = store.shape_attribute(si.shape, &self.name) else {
             return R::cst(0.0);
         };

@@ -14,7 +14,7 @@ pub use checkerboard::{Checkerboard, MITSUBA_EVAL1_SWAPS_COLORS};
 pub use mesh_attribute::MeshAttribute;
 pub use uniform::Uniform;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
@@ -25,10 +25,10 @@ use std::collections::HashMap;
 /// What every texture plugin provides.
 pub trait TextureT {
     /// RGB value at the interaction's uv.
-    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
+    fn eval<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R>;
     /// Scalar value at the interaction's uv (first channel, or the
     /// luminance-free mean for RGB data, as Mitsuba's `eval_1`).
-    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R;
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R;
     /// Mean over the texture (for sampling heuristics), primal only.
     fn mean(&self, store: &ParamStore) -> f32;
     /// Largest value over the texture, primal only.
@@ -46,7 +46,7 @@ pub enum Texture {
 
 impl TextureT for Texture {
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> Spectrum<R> {
         match self {
             Texture::Uniform(t) => t.eval(store, si),
             Texture::Bitmap(t) => t.eval(store, si),
@@ -55,7 +55,7 @@ impl TextureT for Texture {
         }
     }
     #[inline]
-    fn eval_1<R: Real>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, si: &SurfaceInteraction<R>) -> R {
         match self {
             Texture::Uniform(t) => t.eval_1(store, si),
             Texture::Bitmap(t) => t.eval_1(store, si),
@@ -185,7 +185,7 @@ impl Texture {
 /// A surface interaction at `uv` (on the z = 0 plane, normal +z, viewed
 /// from above), for texture tests.
 #[cfg(test)]
-pub(crate) fn si_at_uv<R: Real>(u: f32, v: f32) -> SurfaceInteraction<R> {
+pub(crate) fn si_at_uv<R: ScalarReal>(u: f32, v: f32) -> SurfaceInteraction<R> {
     use crate::math::{Frame, V2, V3};
     let n = V3::cst(glam::Vec3::Z);
     SurfaceInteraction {

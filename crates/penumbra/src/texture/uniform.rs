@@ -1,7 +1,7 @@
 //! A constant value (Mitsuba's implicit uniform texture for plain values).
 
 use super::{Channels, TextureT};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::{Spectrum, V3};
@@ -44,7 +44,7 @@ impl Uniform {
 impl Uniform {
     /// The value (a mono value on all three channels).
     #[inline]
-    pub fn value<R: Real>(&self, store: &ParamView) -> Spectrum<R> {
+    pub fn value<R: ScalarReal>(&self, store: &ParamView) -> Spectrum<R> {
         match self.channels {
             Channels::Mono => V3::splat(store.read(self.id, 0)),
             Channels::Rgb => store.read3(self.id, 0),
@@ -54,11 +54,11 @@ impl Uniform {
 
 impl TextureT for Uniform {
     #[inline]
-    fn eval<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
+    fn eval<R: ScalarReal>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> Spectrum<R> {
         self.value(store)
     }
     #[inline]
-    fn eval_1<R: Real>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> R {
+    fn eval_1<R: ScalarReal>(&self, store: &ParamView, _si: &SurfaceInteraction<R>) -> R {
         match self.channels {
             Channels::Mono => store.read(self.id, 0),
             Channels::Rgb => store.read3::<R>(self.id, 0).mean(),

@@ -1,7 +1,7 @@
 //! A spatially constant volume (Mitsuba's `constvolume`, also what a plain
 //! value given for a medium's `sigma_t` or `albedo` becomes).
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore, ParamView};
@@ -49,7 +49,7 @@ impl ConstVolume {
     }
 
     #[inline]
-    pub fn eval<R: Real>(&self, store: &ParamView) -> Spectrum<R> {
+    pub fn eval<R: ScalarReal>(&self, store: &ParamView) -> Spectrum<R> {
         self.value.value(store)
     }
 

@@ -4,7 +4,7 @@
 //! ((i, j, k) + ½) / resolution) and filtered trilinearly or by the nearest
 //! voxel, as Mitsuba's 3D textures are.
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::math::{floor_i64, Spectrum, Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
@@ -204,7 +204,7 @@ impl GridVolume {
 
     /// The value at world-space point `p`, read from the store in `R`.
     #[inline]
-    pub fn eval<R: Real>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
+    pub fn eval<R: ScalarReal>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
         let q = self.to_local.point(p);
         let res = Vec3::new(self.res[0] as f32, self.res[1] as f32, self.res[2] as f32);
         let x = q * res - 0.5;
@@ -248,7 +248,7 @@ impl GridVolume {
 
     /// The value of voxel `i` (x, y, z; wrapped into the grid).
     #[inline]
-    fn voxel<R: Real>(&self, store: &ParamView, i: [i64; 3]) -> Spectrum<R> {
+    fn voxel<R: ScalarReal>(&self, store: &ParamView, i: [i64; 3]) -> Spectrum<R> {
         let [nx, ny, nz] = self.res;
         let (x, y, z) = (
             self.wrap.index(i[0], nx),

@@ -10,7 +10,7 @@ mod gridvolume;
 pub use constvolume::ConstVolume;
 pub use gridvolume::{GridVolume, VolFile};
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::math::Spectrum;
 use crate::params::{Domain, ParamStore, ParamView};
@@ -71,7 +71,7 @@ impl Volume {
     /// The value at world-space point `p` (a one-channel volume on all
     /// three channels).
     #[inline]
-    pub fn eval<R: Real>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
+    pub fn eval<R: ScalarReal>(&self, store: &ParamView, p: Vec3) -> Spectrum<R> {
         match self {
             Volume::Const(v) => v.eval(store),
             Volume::Grid(v) => v.eval(store, p),

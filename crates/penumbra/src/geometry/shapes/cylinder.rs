@@ -16,7 +16,7 @@
 //! it moves, turns and scales the cylinder).
 
 use super::{analytic_interaction, azimuth};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{Frame, Transform, V2, V3};
@@ -191,7 +191,7 @@ fn unit_cylinder_roots(o: DVec3, d: DVec3) -> Option<(f64, f64)> {
 }
 
 impl ShapeT for Cylinder {
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -235,7 +235,12 @@ impl ShapeT for Cylinder {
 
     /// The point with the primal point's local angle and height, moving
     /// with `to_world`.
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
         let f = self.frame(store);
         let q = p - f.c;
         let xy = Vec2::new(
@@ -285,7 +290,7 @@ impl ShapeT for Cylinder {
 impl Cylinder {
     /// The `p0` end's centre and the images of the local x, y, z axes, in
     /// `R`.
-    pub(crate) fn frame_r<R: Real>(&self, store: &ParamView) -> [V3<R>; 4] {
+    pub(crate) fn frame_r<R: ScalarReal>(&self, store: &ParamView) -> [V3<R>; 4] {
         let id = self.to_world;
         let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
         let col = |c: usize| V3::new(m(0, c), m(1, c), m(2, c));
@@ -295,7 +300,7 @@ impl Cylinder {
     /// Normal, uv and shading frame at local point (x, y, z) (x² + y² = 1),
     /// world point `p`; the area scale is |∂p/∂φ × ∂p/∂z|.
     #[allow(clippy::too_many_arguments)]
-    fn local_geometry<R: Real>(
+    fn local_geometry<R: ScalarReal>(
         &self,
         hit: &Hit,
         [a0, a1, a2]: [V3<R>; 3],

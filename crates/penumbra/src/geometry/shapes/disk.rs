@@ -7,7 +7,7 @@
 //! The normal is `to_world`'s normal transform of +z.
 
 use super::{analytic_interaction, azimuth};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Transform, V2, V3};
@@ -132,7 +132,7 @@ impl Disk {
 }
 
 impl ShapeT for Disk {
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -159,7 +159,12 @@ impl ShapeT for Disk {
 
     /// The point with the primal point's local disk coordinates, moving
     /// with `to_world`.
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
         let f = self.frame(store);
         let nv = f.a0.cross(f.a1);
         let q = p - f.c;
@@ -175,7 +180,7 @@ impl ShapeT for Disk {
 
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
         let f = self.frame(store);
-        let l = warp::square_to_uniform_disk_concentric(u);
+        let l = Vec2::from(warp::square_to_uniform_disk_concentric(u.into()));
         let mut n = f.a0.cross(f.a1).normalize() * self.normal_sign();
         if self.flip_normals {
             n = -n;
@@ -198,7 +203,7 @@ impl ShapeT for Disk {
 
 impl Disk {
     /// Centre and images of the local x and y axes, in `R`.
-    pub(crate) fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, V3<R>, V3<R>) {
+    pub(crate) fn frame_r<R: ScalarReal>(&self, store: &ParamView) -> (V3<R>, V3<R>, V3<R>) {
         let id = self.to_world;
         let m = |r: usize, c: usize| -> R { store.read(id, 4 * r + c) };
         (
@@ -211,7 +216,7 @@ impl Disk {
     /// Normal, polar uv and shading frame at local coordinates (x, y),
     /// world point `p`; the area scale is |a0 × a1|.
     #[allow(clippy::too_many_arguments)]
-    fn local_geometry<R: Real>(
+    fn local_geometry<R: ScalarReal>(
         &self,
         hit: &Hit,
         a0: V3<R>,

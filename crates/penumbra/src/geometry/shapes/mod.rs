@@ -15,7 +15,7 @@ pub use cylinder::Cylinder;
 pub use disk::Disk;
 pub use sphere::Sphere;
 
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::mesh::MeshOptions;
 use crate::geometry::{Hit, SurfaceInteraction};
@@ -44,7 +44,7 @@ pub(crate) fn filename(
 
 /// The azimuth `atan2(y, x)` wrapped to [0, 2π) (the φ of the analytic
 /// shapes' uv parametrisations).
-pub(crate) fn azimuth<R: Real>(y: R, x: R) -> R {
+pub(crate) fn azimuth<R: ScalarReal>(y: R, x: R) -> R {
     let mut phi = y.atan2(x);
     if phi.val() < 0.0 {
         phi += R::cst(2.0 * PI);
@@ -58,7 +58,7 @@ pub(crate) fn azimuth<R: Real>(y: R, x: R) -> R {
 /// (see [`SurfaceInteraction::area_scale`]): the shading frame from `n`
 /// and ∂p/∂u; `wi` zero.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn analytic_interaction<R: Real>(
+pub(crate) fn analytic_interaction<R: ScalarReal>(
     hit: &Hit,
     t: R,
     p: V3<R>,

@@ -13,7 +13,7 @@
 //! `flip_normals`).
 
 use super::{analytic_interaction, azimuth};
-use crate::ad::Real;
+use crate::ad::ScalarReal;
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Hit, PositionSample, ShapeT, SurfaceInteraction};
 use crate::math::{warp, Frame, V2, V3};
@@ -132,7 +132,7 @@ impl Sphere {
     /// Centre, radius and the images of the local axes (unit), in `R`:
     /// from `to_world` when its reads carry derivatives, else from
     /// `center` and `radius` with the rotation a constant.
-    pub(crate) fn frame_r<R: Real>(&self, store: &ParamView) -> (V3<R>, R, [V3<R>; 3]) {
+    pub(crate) fn frame_r<R: ScalarReal>(&self, store: &ParamView) -> (V3<R>, R, [V3<R>; 3]) {
         if R::tracks(store, self.to_world) {
             let m = |r: usize, c: usize| -> R { store.read(self.to_world, 4 * r + c) };
             let col = |c: usize| V3::new(m(0, c), m(1, c), m(2, c));
@@ -204,7 +204,7 @@ fn placement(c: Vec3, r: f32, rot: Mat3) -> Vec<f32> {
 }
 
 impl ShapeT for Sphere {
-    fn surface_interaction<R: Real>(
+    fn surface_interaction<R: ScalarReal>(
         &self,
         store: &ParamView,
         ray: &DiffRay<R>,
@@ -238,7 +238,12 @@ impl ShapeT for Sphere {
     /// The point at the primal point's direction from the centre, in the
     /// sphere's local frame: it moves with the centre and scales with the
     /// radius.
-    fn point_at<R: Real>(&self, store: &ParamView, hit: &Hit, p: Vec3) -> SurfaceInteraction<R> {
+    fn point_at<R: ScalarReal>(
+        &self,
+        store: &ParamView,
+        hit: &Hit,
+        p: Vec3,
+    ) -> SurfaceInteraction<R> {
         let (c, r, axes) = self.frame_r::<R>(store);
         let local = self.rot.transpose() * (p - c.val()).normalize();
         let dir = axes[0] * R::cst(local.x) + axes[1] * R::cst(local.y) + axes[2] * R::cst(local.z);
@@ -354,7 +359,7 @@ impl Sphere {
     /// Normal, uv and shading frame at point `p` of the sphere (centre `c`,
     /// radius `r`); the area scale is r² (area per unit solid angle seen
     /// from the centre).
-    fn local_geometry<R: Real>(
+    fn local_geometry<R: ScalarReal>(
         &self,
         hit: &Hit,
         c: V3<R>,
