@@ -20,7 +20,6 @@
 //! same values at every width.
 
 use super::{Float, Mask, Real};
-use crate::params::{ParamId, ParamView};
 use std::fmt::{self, Debug};
 use std::ops::{
     Add, AddAssign, BitAnd, BitAndAssign, BitOr, BitOrAssign, Div, DivAssign, Mul, MulAssign, Neg,
@@ -234,9 +233,6 @@ impl<const N: usize> Real for Lanes<N> {
                 b.0[i]
             }
         }))
-    }
-    fn tracks(_store: &ParamView, _id: ParamId) -> bool {
-        false
     }
     // each lane as `f32`'s implementation of `Real` computes it
     #[inline(always)]
