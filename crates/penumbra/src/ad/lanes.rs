@@ -61,6 +61,20 @@ pub fn widest_lanes() -> usize {
     1
 }
 
+/// `[f(0), …, f(N − 1)]` as a plain loop: `std::array::from_fn` goes
+/// through closures that LLVM left out of line, and code left out of line
+/// is compiled without the target features of the entry point that runs
+/// the lanes (docs/perf/lanes.md): every lane operation builds its array
+/// here.
+#[inline(always)]
+pub fn each_lane<T: Copy + Default, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
+    let mut out = [T::default(); N];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = f(i);
+    }
+    out
+}
+
 impl<const N: usize> Lanes<N> {
     #[inline(always)]
     pub fn splat(v: f32) -> Self {
@@ -69,19 +83,19 @@ impl<const N: usize> Lanes<N> {
     /// Lane `i`'s value from `f(i)`.
     #[inline(always)]
     pub fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
-        Lanes(std::array::from_fn(f))
+        Lanes(each_lane(f))
     }
     #[inline(always)]
     fn map(self, f: impl Fn(f32) -> f32) -> Self {
-        Lanes(std::array::from_fn(|i| f(self.0[i])))
+        Lanes(each_lane(|i| f(self.0[i])))
     }
     #[inline(always)]
     fn zip(self, o: Self, f: impl Fn(f32, f32) -> f32) -> Self {
-        Lanes(std::array::from_fn(|i| f(self.0[i], o.0[i])))
+        Lanes(each_lane(|i| f(self.0[i], o.0[i])))
     }
     #[inline(always)]
     fn test(self, o: Self, f: impl Fn(f32, f32) -> bool) -> LaneMask<N> {
-        LaneMask(std::array::from_fn(|i| -(f(self.0[i], o.0[i]) as i32)))
+        LaneMask(each_lane(|i| -(f(self.0[i], o.0[i]) as i32)))
     }
 }
 
@@ -94,7 +108,7 @@ impl<const N: usize> LaneMask<N> {
     /// The mask from `f(i)` per lane.
     #[inline(always)]
     pub fn from_fn(mut f: impl FnMut(usize) -> bool) -> Self {
-        LaneMask(std::array::from_fn(|i| -(f(i) as i32)))
+        LaneMask(each_lane(|i| -(f(i) as i32)))
     }
 }
 
@@ -169,7 +183,7 @@ macro_rules! mask_binop {
             type Output = Self;
             #[inline(always)]
             fn $f(self, o: Self) -> Self {
-                LaneMask(std::array::from_fn(|i| self.0[i] $op o.0[i]))
+                LaneMask(each_lane(|i| self.0[i] $op o.0[i]))
             }
         }
         impl<const N: usize> $tra for LaneMask<N> {
@@ -226,13 +240,7 @@ impl<const N: usize> Real for Lanes<N> {
     }
     #[inline(always)]
     fn select(m: LaneMask<N>, a: Self, b: Self) -> Self {
-        Lanes(std::array::from_fn(|i| {
-            if m.0[i] != 0 {
-                a.0[i]
-            } else {
-                b.0[i]
-            }
-        }))
+        Lanes(each_lane(|i| if m.0[i] != 0 { a.0[i] } else { b.0[i] }))
     }
     // each lane as `f32`'s implementation of `Real` computes it
     #[inline(always)]

@@ -1,10 +1,10 @@
 //! `diffuse`: the ideal Lambertian reflector.
 
 use super::{BsdfContextT, BsdfFlags, BsdfSample, BsdfT, NodeContext};
-use crate::ad::ScalarReal;
+use crate::ad::{Float, Mask, Real, ScalarReal};
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::{warp, Spectrum, V3};
+use crate::math::{warp, Spectrum, V2, V3};
 use crate::params::{Domain, ParamView};
 use crate::scene::description::{LoadContext, Node};
 use crate::texture::{Channels, Texture, TextureT};
@@ -61,30 +61,17 @@ pub struct DiffuseContext<R: ScalarReal> {
 
 impl<R: ScalarReal> BsdfContextT<R> for DiffuseContext<R> {
     fn eval(&self, wo: V3<R>) -> Spectrum<R> {
-        if !(self.wi.z.val() > 0.0 && wo.z.val() > 0.0) {
-            return V3::zero();
-        }
-        self.reflectance * (wo.z * FRAC_1_PI)
+        lambert_eval(self.wi, wo, self.reflectance)
     }
 
     fn pdf(&self, wo: Vec3) -> f32 {
-        if !(self.wi.z.val() > 0.0) {
-            return 0.0;
-        }
-        warp::square_to_cosine_hemisphere_pdf(wo.into())
+        lambert_pdf(self.wi.z.val(), wo.into())
     }
 
     fn sample(&self, _u1: f32, u2: Vec2) -> Option<BsdfSample<R>> {
-        if !(self.wi.z.val() > 0.0) {
-            return None;
-        }
-        let wo = Vec3::from(warp::square_to_cosine_hemisphere(u2.into()));
-        let pdf = warp::square_to_cosine_hemisphere_pdf(wo.into());
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample {
-            wo: V3::cst(wo),
+        let (wo, pdf, valid) = lambert_sample(self.wi.z.val(), u2.into());
+        valid.then(|| BsdfSample {
+            wo: V3::cst(wo.into()),
             pdf,
             // f cos / pdf = reflectance exactly (cos/π cancels)
             weight: self.reflectance,
@@ -96,6 +83,43 @@ impl<R: ScalarReal> BsdfContextT<R> for DiffuseContext<R> {
     fn albedo(&self) -> Spectrum<R> {
         self.reflectance
     }
+}
+
+// Lambertian reflection written once for every number type: the scalar
+// context above, and the path tracer in lanes (`integrator::lanes`), where
+// each lane is another path.
+
+/// `f(wi, wo) · cos θo` of Lambertian reflection: `reflectance · cos θo / π`
+/// where both directions are on the front side, else zero.
+#[inline(always)]
+pub(crate) fn lambert_eval<R: Real>(wi: V3<R>, wo: V3<R>, reflectance: Spectrum<R>) -> Spectrum<R> {
+    let front = wi.z.val().gt(0.0) & wo.z.val().gt(0.0);
+    if front.none() {
+        return V3::zero();
+    }
+    let f = reflectance * (wo.z * <R::Prim as Real>::cst(FRAC_1_PI));
+    V3::select(front, f, V3::zero())
+}
+
+/// The density of [`lambert_sample`]'s directions: `cos θo / π` seen from
+/// the front side, zero from the back.
+#[inline(always)]
+pub(crate) fn lambert_pdf<F: Float>(wi_z: F, wo: V3<F>) -> F {
+    F::select(
+        wi_z.gt(0.0),
+        warp::square_to_cosine_hemisphere_pdf(wo),
+        F::cst(0.0),
+    )
+}
+
+/// A cosine-weighted direction for `u` (Malley's method), its density, and
+/// whether it is a sample: only from the front side, never at a density of
+/// zero (the horizon).
+#[inline(always)]
+pub(crate) fn lambert_sample<F: Float>(wi_z: F, u: V2<F>) -> (V3<F>, F, F::Mask) {
+    let wo = warp::square_to_cosine_hemisphere(u);
+    let pdf = warp::square_to_cosine_hemisphere_pdf(wo);
+    (wo, pdf, wi_z.gt(0.0) & pdf.gt(0.0))
 }
 
 #[cfg(test)]

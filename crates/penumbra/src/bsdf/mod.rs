@@ -35,6 +35,7 @@ pub use blendbsdf::{BlendBsdf, BlendBsdfContext};
 pub use bumpmap::BumpMap;
 pub use conductor::{Conductor, ConductorContext};
 pub use dielectric::{Dielectric, DielectricContext};
+pub(crate) use diffuse::{lambert_eval, lambert_pdf, lambert_sample};
 pub use diffuse::{Diffuse, DiffuseContext};
 pub use mask::{Mask, MaskContext};
 pub use normalmap::{NormalMap, PerturbedFrameContext};

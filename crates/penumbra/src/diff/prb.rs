@@ -270,15 +270,8 @@ fn backward_pass(
     let (cw, ch) = layout.size();
 
     // 1. total filter weight per pixel (positions only: no tracing)
-    let m = layout.margin;
     let weight_blocks = layout.map_tiles(opts, |tile| {
-        let mut block = ImageBlock::new(
-            tile.x0 - m,
-            tile.y0 - m,
-            (tile.w + 2 * m) as usize,
-            (tile.h + 2 * m) as usize,
-            0,
-        );
+        let mut block = layout.tile_block(tile, 0);
         layout.for_each_sample(tile, |pos, _, _| block.put(filter, pos.x, pos.y, &[]));
         block
     })?;

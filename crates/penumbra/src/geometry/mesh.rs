@@ -630,6 +630,49 @@ impl Mesh {
         }
     }
 
+    /// The texture coordinates at barycentrics `b` = (b1, b2) of triangle
+    /// `prim` (primal): interpolated from the mesh's, or `b` itself where
+    /// it has none (as [`Mesh::triangle_interaction`]).
+    #[inline]
+    pub(crate) fn uv_primal(&self, store: &ParamStore, prim: u32, b: Vec2) -> Vec2 {
+        let Some(tid) = self.texcoords else {
+            return b;
+        };
+        let t = store.data(tid);
+        let tc = |i: u32| Vec2::from_slice(&t[2 * i as usize..2 * i as usize + 2]);
+        let [i0, i1, i2] = self.faces[prim as usize];
+        tc(i0) * (1.0 - b.x - b.y) + tc(i1) * b.x + tc(i2) * b.y
+    }
+
+    /// The corners of triangle `prim` as the path tracer in lanes reads
+    /// them for a primal hit (it interpolates them itself, many hits at
+    /// once): the positions, the shading normals at the corners (the
+    /// vertex normals, or the face normal where the mesh has none), and the
+    /// face normal, both oriented as [`Mesh::triangle_interaction`] orients
+    /// them (with `flip_normals`).
+    #[inline(always)]
+    pub(crate) fn corners_primal(
+        &self,
+        store: &ParamStore,
+        prim: u32,
+    ) -> ([Vec3; 3], [Vec3; 3], Vec3) {
+        let face = self.faces[prim as usize];
+        let read = |id: ParamId, i: u32| Vec3::from_slice(&store.data(id)[3 * i as usize..]);
+        let n = self.face_n[prim as usize];
+        let ns = match self.normals {
+            Some(nid) => {
+                let ns = face.map(|i| read(nid, i));
+                if self.flip_normals {
+                    ns.map(|v| -v)
+                } else {
+                    ns
+                }
+            }
+            None => [n; 3],
+        };
+        (face.map(|i| read(self.positions, i)), ns, n)
+    }
+
     /// The vertex normal of vertex `v` recomputed from the positions in `R`
     /// (the same formula as [`vertex_normals`]).
     fn derived_normal<R: ScalarReal>(&self, store: &ParamView, v: usize) -> V3<R> {
@@ -814,19 +857,10 @@ impl ShapeT for Mesh {
         let [p0, p1, p2] = self.triangle(store, f);
         let b0 = 1.0 - b.x - b.y;
         let p = p0 * b0 + p1 * b.x + p2 * b.y;
-        let uv = match self.texcoords {
-            Some(tid) => {
-                let t = store.data(tid);
-                let [i0, i1, i2] = self.faces[f];
-                let tc = |i: u32| Vec2::from_slice(&t[2 * i as usize..2 * i as usize + 2]);
-                tc(i0) * b0 + tc(i1) * b.x + tc(i2) * b.y
-            }
-            None => b,
-        };
         PositionSample {
             p,
             n: self.face_n[f],
-            uv,
+            uv: self.uv_primal(store, f as u32, b),
             local: b,
             pdf: 1.0 / self.area,
             prim: f as u32,

@@ -4,6 +4,7 @@
 mod aov;
 mod budgets;
 mod direct;
+mod lanes;
 mod moment;
 pub(crate) mod path;
 pub(crate) mod render;
@@ -17,7 +18,7 @@ pub use path::PathIntegrator;
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 pub use volpath::VolPathIntegrator;
 
-use crate::ad::ScalarReal;
+use crate::ad::{Float, ScalarReal};
 use crate::bsdf::{BsdfContext, BsdfContextT, BsdfFlags, BsdfSample};
 use crate::emitter::EmitterT;
 use crate::error::Result;
@@ -404,28 +405,43 @@ pub(crate) fn roulette(
     rng: &mut SampleStream,
 ) -> Option<Survival> {
     let u = rng.next_1d();
-    let t_max = throughput.max_element() * eta * eta;
-    if !(t_max > 0.0) {
-        return None;
-    }
-    if depth < rr_depth {
-        return Some(Survival(None));
-    }
-    let q = t_max.min(0.95);
-    (u < q).then_some(Survival(Some(q)))
+    let (survives, q) = survival_probability(throughput.max_element(), eta, depth, rr_depth, u);
+    survives.then_some(Survival((depth >= rr_depth).then_some(q)))
 }
 
-/// Balance of two sampling strategies by the power heuristic (β = 2).
+/// Russian roulette's decision for paths whose largest throughput channel
+/// is `t_max` (primal, after the bounce), drawn with `u`: whether the path
+/// goes on, and the probability it went on with (1 before `rr_depth`). A
+/// path with nothing left to carry (`t_max` zero or NaN) ends at any depth.
 #[inline(always)]
-pub(crate) fn mis_weight(pdf_a: f32, pdf_b: f32) -> f32 {
-    let (a, b) = (pdf_a * pdf_a, pdf_b * pdf_b);
-    if a + b > 0.0 && a.is_finite() {
-        a / (a + b)
-    } else if a.is_infinite() {
-        1.0
-    } else {
-        0.0
+pub(crate) fn survival_probability<F: Float>(
+    t_max: F,
+    eta: f32,
+    depth: u32,
+    rr_depth: u32,
+    u: F,
+) -> (F::Mask, F) {
+    let t_max = t_max * F::cst(eta) * F::cst(eta);
+    let carries = t_max.gt(0.0);
+    if depth < rr_depth {
+        return (carries, F::cst(1.0));
     }
+    let q = t_max.min(F::cst(0.95));
+    (carries & u.lt(q), q)
+}
+
+/// Balance of two sampling strategies by the power heuristic (β = 2):
+/// strategy a's weight, 1 where its density is infinite (a delta), 0 where
+/// both vanish.
+#[inline(always)]
+pub(crate) fn mis_weight<F: Float>(pdf_a: F, pdf_b: F) -> F {
+    let (a, b) = (pdf_a * pdf_a, pdf_b * pdf_b);
+    let sum = a + b;
+    F::select(
+        sum.gt(0.0) & a.finite(),
+        a / sum,
+        F::select(a.equals(f32::INFINITY), F::cst(1.0), F::cst(0.0)),
+    )
 }
 
 /// `max_depth` as Mitsuba defines it: -1 for unbounded, else ≥ 0.

@@ -3,6 +3,7 @@
 //! fixed order, so the image is identical for a given seed whatever the
 //! number of threads.
 
+use super::lanes::{lane_width, LanePath};
 use crate::error::{Error, Result};
 use crate::image::ImageBlock;
 use crate::sampler::SampleStream;
@@ -84,7 +85,12 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
         }
         names.insert(3.min(n), "A".into());
     }
-    let (block, non_finite_samples) =
+    let lanes = LanePath::new(scene, lane_width()?);
+    let (block, non_finite_samples) = if let Some(lanes) = &lanes {
+        render_tiles(scene, opts, names.len(), "render", |layout, tile, block| {
+            lanes.render_tile(layout, tile, alpha, block)
+        })?
+    } else {
         render_samples(scene, opts, names.len(), "render", |cs, rng, out| {
             if alpha {
                 // colour, alpha, then any further (AOV) channels
@@ -102,7 +108,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
             } else {
                 integrator.sample(scene, cs, rng, out);
             }
-        })?;
+        })?
+    };
     Ok(Rendered {
         width: block.width,
         height: block.height,
@@ -255,25 +262,46 @@ impl<'a> SampleLayout<'a> {
         tile: Tile,
         mut f: impl FnMut(Vec2, &CameraSample, &mut SampleStream),
     ) {
-        let sensor = self.sensor;
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
-                // a key per film pixel (border pixels included)
-                let pixel = ((y + 0x8000) as u64) << 32 | (x + 0x8000) as u64;
                 for s in 0..self.spp {
-                    let mut rng = sensor.sampler.stream(self.seed, pixel, s, self.spp);
-                    let u = rng.next_2d();
-                    let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
-                    let lens_u = if self.lens { rng.next_2d() } else { Vec2::ZERO };
-                    let cs = CameraSample {
-                        sensor,
-                        film: (pos + self.crop_off) * self.inv_size,
-                        lens: lens_u,
-                    };
+                    let (pos, cs, mut rng) = self.camera_sample(x, y, s);
                     f(pos, &cs, &mut rng);
                 }
             }
         }
+    }
+
+    /// An empty block of `channels` values per pixel for the samples of
+    /// `tile`: the tile and its filter margin.
+    pub fn tile_block(&self, tile: Tile, channels: usize) -> ImageBlock {
+        let m = self.margin;
+        ImageBlock::new(
+            tile.x0 - m,
+            tile.y0 - m,
+            (tile.w + 2 * m) as usize,
+            (tile.h + 2 * m) as usize,
+            channels,
+        )
+    }
+
+    /// Sample `s` of pixel `(x, y)`: its film position in pixels, its
+    /// camera sample and the stream of its further random numbers.
+    #[inline(always)]
+    pub fn camera_sample(&self, x: i64, y: i64, s: u32) -> (Vec2, CameraSample<'a>, SampleStream) {
+        let sensor = self.sensor;
+        // a key per film pixel (border pixels included)
+        let pixel = ((y + 0x8000) as u64) << 32 | (x + 0x8000) as u64;
+        let mut rng = sensor.sampler.stream(self.seed, pixel, s, self.spp);
+        let u = rng.next_2d();
+        let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
+        let lens_u = if self.lens { rng.next_2d() } else { Vec2::ZERO };
+        let cs = CameraSample {
+            sensor,
+            film: (pos + self.crop_off) * self.inv_size,
+            lens: lens_u,
+        };
+        (pos, cs, rng)
     }
 
     /// Runs `per_tile` on every tile of the sampled region, in parallel,
@@ -351,18 +379,8 @@ pub(crate) fn render_samples<F>(
 where
     F: Fn(&CameraSample, &mut SampleStream, &mut [f32]) + Sync,
 {
-    let layout = SampleLayout::new(scene, opts)?;
-    layout.check_memory(scene, opts, channels, false)?;
-    let filter = &layout.sensor.film.rfilter;
-    let m = layout.margin;
-    let blocks = layout.map_tiles(opts, |tile| {
-        let mut block = ImageBlock::new(
-            tile.x0 - m,
-            tile.y0 - m,
-            (tile.w + 2 * m) as usize,
-            (tile.h + 2 * m) as usize,
-            channels,
-        );
+    render_tiles(scene, opts, channels, what, |layout, tile, block| {
+        let filter = &layout.sensor.film.rfilter;
         let mut out = vec![0.0f32; channels];
         let mut non_finite = 0usize;
         layout.for_each_sample(tile, |pos, cs, rng| {
@@ -374,6 +392,31 @@ where
                 non_finite += 1;
             }
         });
+        non_finite
+    })
+}
+
+/// Runs `fill(layout, tile, block)` for every tile of the sampled region,
+/// in parallel: it splats the samples of `tile` (`channels` values each)
+/// into `block`, which covers the tile and its filter margin, and returns
+/// how many it left out for a non-finite value. Returns the merged
+/// crop-window block and the number left out (reported once with
+/// [`report_non_finite`]).
+pub(crate) fn render_tiles<F>(
+    scene: &Scene,
+    opts: &RenderOptions,
+    channels: usize,
+    what: &str,
+    fill: F,
+) -> Result<(ImageBlock, usize)>
+where
+    F: Fn(&SampleLayout, Tile, &mut ImageBlock) -> usize + Sync,
+{
+    let layout = SampleLayout::new(scene, opts)?;
+    layout.check_memory(scene, opts, channels, false)?;
+    let blocks = layout.map_tiles(opts, |tile| {
+        let mut block = layout.tile_block(tile, channels);
+        let non_finite = fill(&layout, tile, &mut block);
         (block, non_finite)
     })?;
     let (cw, ch) = layout.size();
