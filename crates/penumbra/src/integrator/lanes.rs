@@ -3,8 +3,10 @@
 //! bounce (the vertex's frame, the BSDF's value, density and sample, the
 //! MIS weights, Russian roulette, the throughput) is one instruction for
 //! all of them, 16 or 8 lanes wide where the processor has AVX-512 or
-//! AVX2 (docs/perf/lanes.md). Traversal, emitter sampling, texture look-ups
-//! and emission are the plugins' own code, called lane by lane.
+//! AVX2 (docs/perf/lanes.md). Emission and light sampling of `area`
+//! emitters on meshes (a plain radiance) are in lanes too; traversal, the
+//! other emitters' sampling and texture look-ups (at an interaction that
+//! holds only the hit's uv) are the plugins' own code, called lane by lane.
 //!
 //! The estimator is [`PathIntegrator::trace`]'s, step for step (the same
 //! random numbers drawn in the same order), for the scenes whose plugins
