@@ -7,5 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --release -- -D warnings
-cargo test --workspace --release
-./scripts/test_python.sh
+# the release build without LTO across crates (Cargo.toml, release-test);
+# the wheel of the Python tests is built with it too, from the same objects
+cargo test --workspace --profile release-test
+PENUMBRA_CARGO_PROFILE=release-test ./scripts/test_python.sh

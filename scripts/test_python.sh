@@ -5,6 +5,8 @@
 #   scripts/test_python.sh            # venv in <target dir>/py-venv (reused if present)
 #   PENUMBRA_FRESH_VENV=1 scripts/test_python.sh   # recreate it
 #   PYTHON=python3.12 scripts/test_python.sh       # another interpreter (>= 3.9)
+#   PENUMBRA_CARGO_PROFILE=release-test scripts/test_python.sh   # cargo profile of the wheel
+#                                                  # (default release; scripts/test.sh's)
 #
 # The target dir is cargo's: $CARGO_TARGET_DIR when set, else ./target.
 # Needs network access to PyPI on the first run (maturin, pytest, numpy,
@@ -37,7 +39,7 @@ fi
 
 echo "== building the wheel"
 rm -rf "$WHEELS"
-(cd crates/penumbra-py && "$VENV/bin/maturin" build --release -i "$VENV/bin/python" --quiet --out "$WHEELS")
+(cd crates/penumbra-py && "$VENV/bin/maturin" build --profile "${PENUMBRA_CARGO_PROFILE:-release}" -i "$VENV/bin/python" --quiet --out "$WHEELS")
 WHEEL=$(ls "$WHEELS"/penumbra-*.whl | head -n 1)
 "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps "$WHEEL"
 
