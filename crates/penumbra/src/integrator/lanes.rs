@@ -24,7 +24,7 @@ use super::{mis_weight, survival_probability, Integrator};
 use crate::ad::lanes::{each_lane, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::bsdf::{lambert_eval, lambert_pdf, lambert_sample, Bsdf};
-use crate::emitter::{surface_si, Emitter, EmitterSample, EmitterT};
+use crate::emitter::{surface_si, Emitter, EmitterT};
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
@@ -220,14 +220,19 @@ impl<'a> LanePath<'a> {
                     let mut rngs = samples.clone().map(|s| s.2);
                     let active = LaneMask::<N>::from_fn(|k| k < count);
                     let (l, hit) = self.trace(rays, active, &mut rngs);
-                    for (k, (pos, _, _)) in samples.iter().take(count).enumerate() {
-                        let out = [l.x.0[k], l.y.0[k], l.z.0[k], if hit[k] { 1.0 } else { 0.0 }];
-                        let out = if alpha { &out[..] } else { &out[..3] };
-                        if out.iter().all(|v| v.is_finite()) {
-                            block.put(filter, pos.x, pos.y, out);
-                        } else {
-                            non_finite += 1;
-                        }
+                    // samples with a non-finite value are left out
+                    let finite = l.x.finite() & l.y.finite() & l.z.finite();
+                    let keep = each_lane(|k| active.lane(k) && finite.lane(k));
+                    non_finite += count - keep.iter().filter(|&&k| k).count();
+                    let px = each_lane(|k| samples[k].0.x);
+                    let py = each_lane(|k| samples[k].0.y);
+                    let rgb = [l.x.0, l.y.0, l.z.0];
+                    if alpha {
+                        let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
+                        let [r, g, b] = rgb;
+                        block.put_lanes(filter, px, py, [r, g, b, a], keep);
+                    } else {
+                        block.put_lanes(filter, px, py, rgb, keep);
                     }
                     first += count as u32;
                 }
@@ -390,7 +395,12 @@ impl<'a> LanePath<'a> {
             let mut yn = [Vec3::Z; N];
             let mut y_pdf = [0.0; N];
             let mut y_le = [Vec3::ZERO; N];
-            let mut others: [Option<EmitterSample<f32>>; N] = [None; N];
+            // lanes whose emitter sampled itself: the sample's direction,
+            // density, weight, whether it is a delta, and its shadow ray's
+            // end: a point, or a direction for an emitter at infinity
+            let mut other = [false; N];
+            let (mut o_d, mut o_pdf, mut o_w) = ([Vec3::Z; N], [0.0; N], [Vec3::ZERO; N]);
+            let (mut o_delta, mut o_far, mut o_end) = ([false; N], [false; N], [Vec3::ZERO; N]);
             if let Some(dist) = &scene.emitter_distribution {
                 for k in 0..N {
                     let u = rngs[k].next_2d();
@@ -407,7 +417,15 @@ impl<'a> LanePath<'a> {
                                 (ps.p, ps.n, light.pdf_area, light.radiance);
                         }
                         None => {
-                            others[k] = scene.sample_emitter::<f32>(store, V3::cst(lane3(p, k)), u)
+                            let at = V3::cst(lane3(p, k));
+                            if let Some(es) = scene.sample_emitter::<f32>(store, at, u) {
+                                other[k] = true;
+                                (o_d[k], o_pdf[k], o_w[k]) =
+                                    (es.d.val(), es.ds.pdf, es.weight.val());
+                                o_delta[k] = es.ds.delta;
+                                o_far[k] = !es.ds.dist.is_finite();
+                                o_end[k] = if o_far[k] { es.ds.d } else { es.ds.p };
+                            }
                         }
                     }
                 }
@@ -419,38 +437,40 @@ impl<'a> LanePath<'a> {
             let pdf_area = Lanes::<N>(y_pdf);
             let on_light = pdf_area.gt(0.0) & dist2.gt(0.0) & cos_e.gt(0.0);
             let pdf_light = pdf_area * dist2 / cos_e;
-            let d_em = V3::select(
-                on_light,
-                d_area,
-                lanes3(|k| others[k].map_or(Vec3::Z, |es| es.d.val())),
-            );
-            let pdf_em = Lanes::select(
-                on_light,
-                pdf_light,
-                Lanes::<N>::from_fn(|k| others[k].map_or(0.0, |es| es.ds.pdf)),
-            );
-            let weight = V3::select(
-                on_light,
-                lanes3(|k| y_le[k]) * (one / pdf_light),
-                lanes3(|k| others[k].map_or(Vec3::ZERO, |es| es.weight.val())),
-            );
-            let sampled_em = on_light | LaneMask::<N>::from_fn(|k| others[k].is_some());
+            let weight_light = lanes3(|k| y_le[k]) * (one / pdf_light);
+            // most scenes' lights are all meshes: no lane to blend in
+            let any_other = other.iter().any(|&o| o);
+            let (d_em, pdf_em, weight, sampled_em) = if any_other {
+                let other = LaneMask::<N>::from_fn(|k| other[k]);
+                (
+                    V3::select(on_light, d_area, lanes3(|k| o_d[k])),
+                    Lanes::select(on_light, pdf_light, Lanes(o_pdf)),
+                    V3::select(on_light, weight_light, lanes3(|k| o_w[k])),
+                    on_light | other,
+                )
+            } else {
+                (d_area, pdf_light, weight_light, on_light)
+            };
             let wo = frame.to_local(d_em);
             let f = lambert_eval(wi, wo, reflectance);
             let tried = sampled_em & !f.is_zero();
             let visible = LaneMask::<N>::from_fn(|k| {
                 tried.lane(k) && {
-                    let ray = match others[k] {
-                        None => point(k).spawn_ray_to(y[k]),
-                        Some(es) if es.ds.dist.is_finite() => point(k).spawn_ray_to(es.ds.p),
-                        Some(es) => point(k).spawn_ray(es.ds.d),
+                    let ray = match (other[k], o_far[k]) {
+                        (false, _) => point(k).spawn_ray_to(y[k]),
+                        (true, false) => point(k).spawn_ray_to(o_end[k]),
+                        (true, true) => point(k).spawn_ray(o_end[k]),
                     };
                     !occluded(scene, &ray)
                 }
             });
             if visible.any() {
-                let delta = LaneMask::<N>::from_fn(|k| others[k].is_some_and(|es| es.ds.delta));
-                let w = Lanes::select(delta, one, mis_weight(pdf_em, lambert_pdf(wi.z, wo)));
+                let mis = mis_weight(pdf_em, lambert_pdf(wi.z, wo));
+                let w = if any_other {
+                    Lanes::select(LaneMask::<N>::from_fn(|k| o_delta[k]), one, mis)
+                } else {
+                    mis
+                };
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
             }
