@@ -402,11 +402,13 @@ impl<'a> LanePath<'a> {
             let (mut o_d, mut o_pdf, mut o_w) = ([Vec3::Z; N], [0.0; N], [Vec3::ZERO; N]);
             let (mut o_delta, mut o_far, mut o_end) = ([false; N], [false; N], [Vec3::ZERO; N]);
             if let Some(dist) = &scene.emitter_distribution {
+                // (a lane whose path ended draws nothing: its stream is
+                // its own and is not read again)
                 for k in 0..N {
-                    let u = rngs[k].next_2d();
                     if !alive.lane(k) {
                         continue;
                     }
+                    let u = rngs[k].next_2d();
                     let (em, _, ux) = dist.sample_reuse(u.x);
                     match self.lights[em] {
                         Some(light) => {
@@ -478,13 +480,16 @@ impl<'a> LanePath<'a> {
             // continue the paths by BSDF sampling, then Russian roulette
             // on the throughput after the bounce (as the scalar loop)
             let mut u2 = V2::new(Lanes::splat(0.0), Lanes::<N>::splat(0.0));
+            let mut u_rr = Lanes::<N>::splat(0.0);
             for (k, rng) in rngs.iter_mut().enumerate() {
-                rng.next_1d();
-                let u = rng.next_2d();
-                (u2.x.0[k], u2.y.0[k]) = (u.x, u.y);
+                if alive.lane(k) {
+                    rng.next_1d();
+                    let u = rng.next_2d();
+                    (u2.x.0[k], u2.y.0[k]) = (u.x, u.y);
+                    u_rr.0[k] = rng.next_1d();
+                }
             }
             let (wo, pdf, sampled) = lambert_sample(wi.z, u2);
-            let u_rr = Lanes::<N>::from_fn(|k| rngs[k].next_1d());
             throughput = throughput.mul_elem(reflectance);
             let (survives, q) =
                 survival_probability(throughput.max_elem(), 1.0, depth, path.rr_depth, u_rr);
