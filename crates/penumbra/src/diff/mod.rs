@@ -9,6 +9,7 @@ mod check;
 mod delta_shadow_boundary;
 mod forward;
 mod prb;
+mod prb_lanes;
 mod primary_boundary;
 mod shadow_boundary;
 mod splat;

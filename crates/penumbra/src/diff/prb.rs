@@ -21,6 +21,7 @@
 //! The boundary term of primary visibility is added by
 //! `primary_boundary.rs`, which records one edge at a time.
 
+use super::prb_lanes::LaneAdjoint;
 use super::{
     delta_shadow_boundary, primary_boundary, shadow_boundary, warn_missing_boundary_terms,
     BoundaryTerms,
@@ -29,6 +30,7 @@ use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
 use crate::image::ImageBlock;
+use crate::integrator::lanes::lane_width;
 use crate::integrator::render::{report_non_finite, SampleLayout};
 use crate::integrator::RenderOptions;
 use crate::params::{ParamId, ParamView, Seeds};
@@ -84,7 +86,7 @@ const PAGE: usize = 1 << PAGE_BITS;
 /// tiles are added in f64), and with no test on the value added to (which
 /// elements were touched is found by scanning the touched pages at the
 /// end of the tile).
-struct TileSums<'a> {
+pub(super) struct TileSums<'a> {
     offsets: &'a [usize],
     /// Per page: 1 + its slot in `values`; 0 if the tile has not touched it.
     page_slot: Vec<u32>,
@@ -106,7 +108,7 @@ impl<'a> TileSums<'a> {
     }
 
     #[inline]
-    fn add(&mut self, id: ParamId, i: usize, g: f32) {
+    pub(super) fn add(&mut self, id: ParamId, i: usize, g: f32) {
         let flat = self.offsets[id.0 as usize] + i;
         let page = flat >> PAGE_BITS;
         let mut slot = self.page_slot[page] as usize;
@@ -225,7 +227,8 @@ pub fn render_backward(
         let zeros = scene.params.iter().map(|(_, p)| vec![0.0; p.data.len()]);
         (zeros.collect(), 0)
     } else {
-        backward_pass(scene, &store, &d_image, opts)?
+        let lanes = LaneAdjoint::new(scene, &store, lane_width()?);
+        backward_pass(scene, &store, &d_image, opts, lanes.as_ref())?
     };
     if edges_move && terms.primary {
         non_finite_samples += primary_boundary::add_primary_boundary_gradients(
@@ -258,11 +261,15 @@ pub fn render_backward(
     })
 }
 
-fn backward_pass(
+/// The interior term: every sample's path differentiated by the recorded
+/// parameters, in lanes with `lanes` (`prb_lanes.rs`), else one path at a
+/// time on a tape.
+pub(super) fn backward_pass(
     scene: &Scene,
     store: &ParamView,
     d_image: &[f32],
     opts: &RenderOptions,
+    lanes: Option<&LaneAdjoint>,
 ) -> Result<(Vec<Vec<f64>>, usize)> {
     let layout = SampleLayout::new(scene, opts)?;
     layout.check_memory(scene, opts, 3, true)?;
@@ -303,7 +310,10 @@ fn backward_pass(
             .pop()
             .unwrap_or_else(|| TileSums::new(&offsets));
         let mut non_finite = 0usize;
-        layout.for_each_sample(tile, |pos, cs, rng| {
+        if let Some(lanes) = lanes {
+            non_finite = lanes.tile(&layout, tile, &adjoint, &mut grads);
+        } else {
+            layout.for_each_sample(tile, |pos, cs, rng| {
             let delta = adjoint.gather(filter, pos.x, pos.y);
             if delta == [0.0; 3] {
                 return;
@@ -324,6 +334,7 @@ fn backward_pass(
                 |id, i, g| grads.add(id, i, g),
             );
         });
+        }
         let sums = grads.take();
         spare.lock().unwrap().push(grads);
         (sums, non_finite)

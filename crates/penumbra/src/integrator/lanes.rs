@@ -57,23 +57,81 @@ struct MeshLight<'a> {
     pdf_area: f32,
 }
 
-/// `$name`: [`LanePath::tile_lanes`] `$n` lanes wide, compiled with the
-/// target features `$features` (and so, being inlined into it, everything
-/// it calls down to the lane operations; docs/perf/lanes.md, the rule).
-/// Safe to call only where the processor has them.
-macro_rules! lane_entry {
-    ($name:ident, $n:literal, $features:literal) => {
-        #[target_feature(enable = $features)]
-        fn $name(
-            &self,
-            layout: &SampleLayout,
-            tile: Tile,
-            alpha: bool,
-            block: &mut ImageBlock,
-        ) -> usize {
-            self.tile_lanes::<$n>(layout, tile, alpha, block)
+/// What a caller of [`LanePath::trace`] learns of each path beyond its
+/// radiance, per depth (0: the vertex the camera ray reaches). Reverse
+/// mode in lanes (`diff/prb_lanes.rs`) keeps the factors of every
+/// contribution so as to differentiate the radiance by the reflectances;
+/// the primal image keeps nothing (`()`, whose empty calls compile away,
+/// closures and all).
+pub(crate) trait PathLog<const N: usize> {
+    /// The vertices the lanes' rays reached at `depth` (`None`: escaped
+    /// or ended), their points and face normals.
+    #[inline(always)]
+    fn vertex(&mut self, depth: u32, hits: &[Option<Hit>; N], p: V3<Lanes<N>>, n: &[Vec3; N]) {
+        let _ = (depth, hits, p, n);
+    }
+    /// Radiance that reaches the camera from `depth` per unit of the
+    /// throughput there: emission of a surface hit or of the environment.
+    #[inline(always)]
+    fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
+        let _ = (depth, per_throughput);
+    }
+    /// The light sample's contribution at `depth` per unit of the
+    /// throughput times the reflectance there.
+    #[inline(always)]
+    fn next_event(&mut self, depth: u32, per_reflectance: impl FnOnce() -> V3<Lanes<N>>) {
+        let _ = (depth, per_reflectance);
+    }
+    /// The bounce from `depth`: the throughput that reached the vertex,
+    /// its reflectance (the diffuse sample's weight) and the roulette's
+    /// factor on the throughput after it (0 where the path ended).
+    #[inline(always)]
+    fn bounce(
+        &mut self,
+        depth: u32,
+        throughput: V3<Lanes<N>>,
+        reflectance: V3<Lanes<N>>,
+        survival: Lanes<N>,
+    ) {
+        let _ = (depth, throughput, reflectance, survival);
+    }
+}
+
+impl<const N: usize> PathLog<N> for () {}
+
+/// Work done `N` lanes wide for a width chosen at run time ([`run_lanes`]):
+/// `run` is compiled once per width, inside an entry point that carries
+/// that width's target features. Everything it calls down to the lane
+/// operations must be inlined into it (`#[inline(always)]`), or it is
+/// compiled without them (docs/perf/lanes.md, the rule).
+pub(crate) trait LaneKernel {
+    type Out;
+    fn run<const N: usize>(&mut self) -> Self::Out;
+}
+
+/// `kernel` run `width` lanes wide: 16 (AVX-512), 8 (AVX2 and FMA) or
+/// else 4 (portable code); `width` comes from [`lane_width`], which gives
+/// 16 and 8 only where the processor has their features.
+pub(crate) fn run_lanes<K: LaneKernel>(width: usize, kernel: &mut K) -> K::Out {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+        fn x16<K: LaneKernel>(kernel: &mut K) -> K::Out {
+            kernel.run::<16>()
         }
-    };
+        #[target_feature(enable = "avx2,fma")]
+        fn x8<K: LaneKernel>(kernel: &mut K) -> K::Out {
+            kernel.run::<8>()
+        }
+        match width {
+            // SAFETY: `lane_width` gives these widths only where the
+            // processor has the features.
+            16 => return unsafe { x16(kernel) },
+            8 => return unsafe { x8(kernel) },
+            _ => {}
+        }
+    }
+    kernel.run::<4>()
 }
 
 /// A scene the path tracer in lanes renders, with what it reads per shape.
@@ -166,6 +224,21 @@ impl<'a> LanePath<'a> {
         })
     }
 
+    /// The scene it renders.
+    pub(crate) fn scene(&self) -> &'a Scene {
+        self.scene
+    }
+
+    /// The mesh of shape `shape`.
+    pub(crate) fn mesh(&self, shape: u32) -> &'a Mesh {
+        self.shapes[shape as usize].mesh
+    }
+
+    /// Lanes per call.
+    pub(crate) fn width(&self) -> usize {
+        self.width
+    }
+
     /// Splats the samples of `tile` into `block`, `width` at a time;
     /// returns how many it left out for a non-finite value. With `alpha`,
     /// a fourth channel is 1 where the camera ray reached a surface.
@@ -176,24 +249,30 @@ impl<'a> LanePath<'a> {
         alpha: bool,
         block: &mut ImageBlock,
     ) -> usize {
-        // The entry points carry the target features: everything they
-        // call down to the lane operations is inlined into them, and so
-        // compiled with those features (docs/perf/lanes.md, the rule).
-        #[cfg(target_arch = "x86_64")]
-        match self.width {
-            // SAFETY: `lane_width` gives these widths only where the
-            // processor has the features.
-            16 => return unsafe { self.tile_x16(layout, tile, alpha, block) },
-            8 => return unsafe { self.tile_x8(layout, tile, alpha, block) },
-            _ => {}
+        struct Primal<'s, 'a> {
+            lanes: &'s LanePath<'a>,
+            layout: &'s SampleLayout<'s>,
+            tile: Tile,
+            alpha: bool,
+            block: &'s mut ImageBlock,
         }
-        self.tile_lanes::<4>(layout, tile, alpha, block)
+        impl LaneKernel for Primal<'_, '_> {
+            type Out = usize;
+            #[inline(always)]
+            fn run<const N: usize>(&mut self) -> usize {
+                self.lanes
+                    .tile_lanes::<N>(self.layout, self.tile, self.alpha, self.block)
+            }
+        }
+        let mut kernel = Primal {
+            lanes: self,
+            layout,
+            tile,
+            alpha,
+            block,
+        };
+        run_lanes(self.width, &mut kernel)
     }
-
-    #[cfg(target_arch = "x86_64")]
-    lane_entry!(tile_x16, 16, "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma");
-    #[cfg(target_arch = "x86_64")]
-    lane_entry!(tile_x8, 8, "avx2,fma");
 
     /// The samples of each pixel of `tile` in blocks of `N` (the last one
     /// of a pixel partly filled), in the scalar loop's order.
@@ -219,7 +298,7 @@ impl<'a> LanePath<'a> {
                     let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&self.store).val());
                     let mut rngs = samples.clone().map(|s| s.2);
                     let active = LaneMask::<N>::from_fn(|k| k < count);
-                    let (l, hit) = self.trace(rays, active, &mut rngs);
+                    let (l, hit) = self.trace(rays, active, &mut rngs, &mut ());
                     // samples with a non-finite value are left out
                     let finite = l.x.finite() & l.y.finite() & l.z.finite();
                     let keep = each_lane(|k| active.lane(k) && finite.lane(k));
@@ -243,13 +322,15 @@ impl<'a> LanePath<'a> {
 
     /// [`PathIntegrator::trace`] from the camera rays `rays` in the lanes
     /// of `active`, each lane drawing from its own stream: the radiance
-    /// per lane, and whether each camera ray reached a surface.
+    /// per lane, and whether each camera ray reached a surface. `log`
+    /// hears of every vertex (see [`PathLog`]).
     #[inline(always)]
-    fn trace<const N: usize>(
+    pub(crate) fn trace<const N: usize>(
         &self,
         mut rays: [Ray; N],
         active: LaneMask<N>,
         rngs: &mut [SampleStream; N],
+        log: &mut impl PathLog<N>,
     ) -> (Spectrum<Lanes<N>>, [bool; N]) {
         let (scene, store, path) = (self.scene, &self.store, self.path);
         let (zero, one) = (Lanes::<N>::cst(0.0), Lanes::<N>::cst(1.0));
@@ -298,6 +379,7 @@ impl<'a> LanePath<'a> {
                         emitter.eval_environment::<f32>(store, V3::cst(d)).val()
                     });
                     result += throughput.mul_elem(le) * w;
+                    log.emitted(depth, || le * w);
                 }
             }
             alive = LaneMask::<N>::from_fn(|k| hits[k].is_some());
@@ -335,6 +417,7 @@ impl<'a> LanePath<'a> {
                 p: lane3(p, k),
                 n: face_n[k],
             };
+            log.vertex(depth, &hits, p, &face_n);
 
             // emission of a surface hit by the previous BSDF sample: on
             // the front side (as `Area::eval_surface`), weighted against
@@ -358,6 +441,7 @@ impl<'a> LanePath<'a> {
                     mis_weight(prev_pdf, pdf_em)
                 };
                 result += V3::select(front, throughput.mul_elem(le) * w, V3::zero());
+                log.emitted(depth, || V3::select(front, le * w, V3::zero()));
             }
 
             if depth + 1 >= path.max_depth {
@@ -475,6 +559,11 @@ impl<'a> LanePath<'a> {
                 };
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
+                log.next_event(depth, || {
+                    // `lambert_eval` is the reflectance times this
+                    let f1 = lambert_eval(wi, wo, V3::splat(one));
+                    V3::select(visible, f1.mul_elem(weight) * w, V3::zero())
+                });
             }
 
             // continue the paths by BSDF sampling, then Russian roulette
@@ -490,13 +579,25 @@ impl<'a> LanePath<'a> {
                 }
             }
             let (wo, pdf, sampled) = lambert_sample(wi.z, u2);
+            let reached = throughput;
             throughput = throughput.mul_elem(reflectance);
             let (survives, q) =
                 survival_probability(throughput.max_elem(), 1.0, depth, path.rr_depth, u_rr);
+            let survival = if depth >= path.rr_depth {
+                one / q
+            } else {
+                one
+            };
             if depth >= path.rr_depth {
-                throughput *= one / q;
+                throughput *= survival;
             }
             alive = alive & sampled & survives;
+            log.bounce(
+                depth,
+                reached,
+                reflectance,
+                Lanes::select(alive, survival, zero),
+            );
             if alive.none() {
                 break;
             }
@@ -534,7 +635,7 @@ fn lanes3<const N: usize>(mut f: impl FnMut(usize) -> Vec3) -> V3<Lanes<N>> {
 
 /// Lane `k` of a vector.
 #[inline(always)]
-fn lane3<const N: usize>(v: V3<Lanes<N>>, k: usize) -> Vec3 {
+pub(crate) fn lane3<const N: usize>(v: V3<Lanes<N>>, k: usize) -> Vec3 {
     Vec3::new(v.x.0[k], v.y.0[k], v.z.0[k])
 }
 

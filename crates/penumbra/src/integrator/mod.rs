@@ -4,7 +4,7 @@
 mod aov;
 mod budgets;
 mod direct;
-mod lanes;
+pub(crate) mod lanes;
 mod moment;
 pub(crate) mod path;
 pub(crate) mod render;

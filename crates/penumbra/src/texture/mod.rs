@@ -18,7 +18,7 @@ use crate::ad::ScalarReal;
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
-use crate::params::{Domain, ParamStore, ParamView};
+use crate::params::{Domain, ParamId, ParamStore, ParamView};
 use crate::scene::description::{LoadContext, Node, Value};
 use std::collections::HashMap;
 
@@ -77,6 +77,25 @@ impl TextureT for Texture {
             Texture::Bitmap(t) => t.max(store),
             Texture::Checkerboard(t) => t.max(store),
             Texture::MeshAttribute(t) => t.max(store),
+        }
+    }
+}
+
+impl Texture {
+    /// The parameters this texture reads (values, texels, uv transforms),
+    /// or `None` where they are not known from the texture alone (a mesh
+    /// attribute is the shape's).
+    pub(crate) fn param_ids(&self) -> Option<Vec<ParamId>> {
+        match self {
+            Texture::Uniform(t) => Some(vec![t.id]),
+            Texture::Bitmap(t) => Some(vec![t.data, t.to_uv]),
+            Texture::Checkerboard(t) => {
+                let mut ids = t.color0.param_ids()?;
+                ids.extend(t.color1.param_ids()?);
+                ids.push(t.to_uv);
+                Some(ids)
+            }
+            Texture::MeshAttribute(_) => None,
         }
     }
 }

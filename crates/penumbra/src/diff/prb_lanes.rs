@@ -1,0 +1,596 @@
+//! Reverse mode in lanes, for the derivatives by diffuse reflectances.
+//!
+//! Where the path tracer renders in lanes (`integrator/lanes.rs`: triangle
+//! meshes with `diffuse` BSDFs) and every recorded parameter is read by
+//! the reflectances alone (plain values or textures; not by an emitter,
+//! a mesh or the camera), the radiance of a path is a polynomial in its
+//! vertices' reflectances ρ_d that the lane loop can differentiate without
+//! a tape. With β_d the throughput reaching vertex d, E_d what is emitted
+//! towards the camera there per unit of β_d (a surface's or the
+//! environment's emission, MIS-weighted), N_d the light sample's
+//! contribution per unit of β_d ⊙ ρ_d, and s_d the roulette's factor on the
+//! throughput after the bounce (1/q, or 0 where the path ended), one path's
+//! estimate is
+//!
+//! ```text
+//! L = R_0,   R_d = E_d + ρ_d ⊙ B_d,   B_d = N_d + s_d R_{d+1},
+//! ```
+//!
+//! since a diffuse sample's weight f cos θ / pdf is ρ_d and the BSDF value
+//! of the light sample is ρ_d times a factor free of it. So
+//! ∂L/∂ρ_d = β_d ⊙ B_d, the radiance that leaves vertex d through its
+//! reflection per unit of reflectance. One pass traces the lanes' paths and
+//! logs (E, N, ρ, β, s) per vertex; a sweep from the last vertex back gives
+//! every B_d without dividing by a reflectance (a zero one has its
+//! derivative too). The roulette's q is held fixed, as in the scalar
+//! reverse mode: its derivative is not part of the estimator's (Vicini et
+//! al. 2021, "Path Replay Backpropagation", §4; Mitsuba's `prb` detaches
+//! it likewise).
+//!
+//! Each vertex's adjoint δL ⊙ β_d ⊙ B_d reaches the parameters through the
+//! reflectance's own code evaluated on [`Var`]s: a texture per vertex, at
+//! the point the primal pass looked it up; a plain value once per tile for
+//! the sum of its adjoints. Scenes or parameters outside this take the
+//! scalar reverse mode of `prb.rs`, which records whole paths.
+
+use super::prb::TileSums;
+use crate::ad::lanes::{each_lane, LaneMask, Lanes};
+use crate::ad::reverse::{backward, clear_tape};
+use crate::ad::{Float, Mask, Var};
+use crate::bsdf::Bsdf;
+use crate::emitter::{surface_si, Emitter};
+use crate::geometry::Hit;
+use crate::image::film::AdjointImage;
+use crate::integrator::lanes::{lane3, run_lanes, LaneKernel, LanePath, PathLog};
+use crate::integrator::render::{SampleLayout, Tile};
+use crate::math::V3;
+use crate::params::{ParamId, ParamView};
+use crate::texture::{Texture, TextureT};
+use glam::{DVec3, Vec2, Vec3};
+
+/// A shape's reflectance that reads a recorded parameter.
+#[derive(Clone, Copy)]
+enum Reflectance<'a> {
+    /// The same everywhere: its adjoints are summed over a tile and
+    /// handed to it once.
+    Uniform(&'a Texture),
+    /// Looked up at each vertex.
+    Varying(&'a Texture),
+}
+
+/// The reverse mode in lanes for a scene and its recorded parameters.
+pub(super) struct LaneAdjoint<'a> {
+    lanes: LanePath<'a>,
+    /// The parameter store with the recorded parameters.
+    store: &'a ParamView<'a>,
+    /// Per shape, its reflectance where it reads a recorded parameter.
+    reflectance: Vec<Option<Reflectance<'a>>>,
+}
+
+impl<'a> LaneAdjoint<'a> {
+    /// The reverse mode in lanes `width` wide for the parameters recorded
+    /// in `store`, or `None` where the scene does not render in lanes or a
+    /// recorded parameter is read by anything but the diffuse
+    /// reflectances (see the module documentation).
+    pub(super) fn new(
+        scene: &'a crate::scene::Scene,
+        store: &'a ParamView<'a>,
+        width: usize,
+    ) -> Option<LaneAdjoint<'a>> {
+        if store.moves_geometry() {
+            return None;
+        }
+        let lanes = LanePath::new(scene, width)?;
+        let recorded = |ids: &[ParamId]| ids.iter().any(|&id| store.is_recorded(id));
+        let mut read = Vec::new();
+        let mut reflectance = Vec::with_capacity(scene.shapes.len());
+        for shape in 0..scene.shapes.len() as u32 {
+            // the loop in lanes renders diffuse BSDFs only
+            let Bsdf::Diffuse(diffuse) = scene.shape_bsdf(shape) else {
+                return None;
+            };
+            let texture = &diffuse.reflectance;
+            let ids = texture.param_ids()?;
+            reflectance.push(recorded(&ids).then_some(match texture {
+                Texture::Uniform(_) => Reflectance::Uniform(texture),
+                _ => Reflectance::Varying(texture),
+            }));
+            read.extend(ids);
+        }
+        for emitter in &scene.emitters {
+            let radiance = match emitter {
+                Emitter::Area(area) => &area.radiance,
+                Emitter::Constant(constant) => &constant.radiance,
+                _ => return None,
+            };
+            if recorded(&radiance.param_ids()?) {
+                return None;
+            }
+        }
+        let only_reflectances = scene
+            .params
+            .iter()
+            .all(|(id, _)| !store.is_recorded(id) || read.contains(&id));
+        only_reflectances.then_some(LaneAdjoint {
+            lanes,
+            store,
+            reflectance,
+        })
+    }
+
+    /// Adds to `sums` the gradients of the samples of `tile`, each
+    /// weighted by its adjoint radiance from `adjoint`; returns how many
+    /// samples it left out for a non-finite radiance.
+    pub(super) fn tile(
+        &self,
+        layout: &SampleLayout,
+        tile: Tile,
+        adjoint: &AdjointImage,
+        sums: &mut TileSums,
+    ) -> usize {
+        struct Kernel<'s, 'a, 'o> {
+            this: &'s LaneAdjoint<'a>,
+            layout: &'s SampleLayout<'s>,
+            tile: Tile,
+            adjoint: &'s AdjointImage,
+            sums: &'s mut TileSums<'o>,
+        }
+        impl LaneKernel for Kernel<'_, '_, '_> {
+            type Out = usize;
+            #[inline(always)]
+            fn run<const N: usize>(&mut self) -> usize {
+                self.this
+                    .tile_lanes::<N>(self.layout, self.tile, self.adjoint, self.sums)
+            }
+        }
+        let mut kernel = Kernel {
+            this: self,
+            layout,
+            tile,
+            adjoint,
+            sums,
+        };
+        run_lanes(self.lanes.width(), &mut kernel)
+    }
+
+    /// [`LaneAdjoint::tile`] `N` lanes wide: the samples of each pixel in
+    /// blocks of `N`, as the primal image in lanes takes them.
+    #[inline(always)]
+    fn tile_lanes<const N: usize>(
+        &self,
+        layout: &SampleLayout,
+        tile: Tile,
+        adjoint: &AdjointImage,
+        sums: &mut TileSums,
+    ) -> usize {
+        let scene = self.lanes.scene();
+        let filter = &layout.sensor.film.rfilter;
+        let primal = scene.params.primal();
+        let mut log = Replay::<N>::default();
+        // per shape, the adjoints of a uniform reflectance over the tile
+        let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
+        let mut non_finite = 0;
+        for y in tile.y0..tile.y0 + tile.h {
+            for x in tile.x0..tile.x0 + tile.w {
+                let mut first = 0;
+                while first < layout.spp {
+                    let count = ((layout.spp - first) as usize).min(N);
+                    // lanes past `count` repeat the last sample, inactive
+                    let samples: [_; N] = std::array::from_fn(|k| {
+                        layout.camera_sample(x, y, first + k.min(count - 1) as u32)
+                    });
+                    first += count as u32;
+                    let delta: [[f32; 3]; N] =
+                        each_lane(|k| adjoint.gather(filter, samples[k].0.x, samples[k].0.y));
+                    // a sample without adjoint radiance is not traced
+                    let active = LaneMask::<N>::from_fn(|k| k < count && delta[k] != [0.0; 3]);
+                    if active.none() {
+                        continue;
+                    }
+                    let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
+                    let mut rngs = samples.clone().map(|s| s.2);
+                    log.vertices.clear();
+                    let (l, _) = self.lanes.trace(rays, active, &mut rngs, &mut log);
+                    // samples with a non-finite radiance are left out
+                    let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
+                    non_finite += (0..count)
+                        .filter(|&k| active.lane(k) && !keep.lane(k))
+                        .count();
+                    let delta = V3::new(
+                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][0] } else { 0.0 }),
+                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
+                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
+                    );
+                    log.sweep(delta, |vertex, k, hit, g| {
+                        match self.reflectance[hit.shape as usize] {
+                            None => {}
+                            Some(Reflectance::Uniform(_)) => {
+                                uniform[hit.shape as usize] += g.as_dvec3();
+                            }
+                            Some(Reflectance::Varying(texture)) => {
+                                // the look-up of the primal pass, on Vars
+                                let mesh = self.lanes.mesh(hit.shape);
+                                let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
+                                let p = lane3(vertex.p, k);
+                                let si = surface_si::<Var>(
+                                    p,
+                                    vertex.n[k],
+                                    uv,
+                                    Vec3::Z,
+                                    hit.shape,
+                                    hit.prim,
+                                );
+                                self.scatter(texture, &si, g, sums);
+                            }
+                        }
+                    });
+                }
+            }
+        }
+        for (shape, g) in uniform.iter().enumerate() {
+            if let (Some(Reflectance::Uniform(texture)), false) =
+                (self.reflectance[shape], *g == DVec3::ZERO)
+            {
+                let si = surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, shape as u32, 0);
+                self.scatter(texture, &si, g.as_vec3(), sums);
+            }
+        }
+        non_finite
+    }
+
+    /// Adds to `sums` the gradient of `texture` at `si` for the adjoint
+    /// `g` of its value.
+    fn scatter(
+        &self,
+        texture: &Texture,
+        si: &crate::geometry::SurfaceInteraction<Var>,
+        g: Vec3,
+        sums: &mut TileSums,
+    ) {
+        clear_tape();
+        let value = texture.eval(self.store, si);
+        backward(
+            &[(value.x, g.x), (value.y, g.y), (value.z, g.z)],
+            |id, i, d| sums.add(id, i, d),
+        );
+    }
+}
+
+/// What one depth of the lanes' paths contributes (see the module
+/// documentation); zero in lanes without a vertex there.
+#[derive(Clone, Copy)]
+struct Vertex<const N: usize> {
+    /// E_d.
+    emitted: V3<Lanes<N>>,
+    /// N_d.
+    next_event: V3<Lanes<N>>,
+    /// β_d.
+    throughput: V3<Lanes<N>>,
+    /// ρ_d.
+    reflectance: V3<Lanes<N>>,
+    /// s_d.
+    survival: Lanes<N>,
+    /// Where each lane's ray reached a surface, its point and face normal.
+    hits: [Option<Hit>; N],
+    p: V3<Lanes<N>>,
+    n: [Vec3; N],
+}
+
+impl<const N: usize> Default for Vertex<N> {
+    fn default() -> Self {
+        let zero = V3::zero();
+        Vertex {
+            emitted: zero,
+            next_event: zero,
+            throughput: zero,
+            reflectance: zero,
+            survival: Lanes::splat(0.0),
+            hits: [None; N],
+            p: zero,
+            n: [Vec3::Z; N],
+        }
+    }
+}
+
+/// The log of one block's paths, vertex by vertex.
+#[derive(Default)]
+struct Replay<const N: usize> {
+    vertices: Vec<Vertex<N>>,
+}
+
+impl<const N: usize> Replay<N> {
+    #[inline(always)]
+    fn at(&mut self, depth: u32) -> &mut Vertex<N> {
+        let d = depth as usize;
+        if self.vertices.len() <= d {
+            self.vertices.resize(d + 1, Vertex::default());
+        }
+        &mut self.vertices[d]
+    }
+
+    /// From the last vertex back to the first: calls `scatter(vertex, k,
+    /// hit, g)` with g = δL ⊙ ∂L/∂ρ_d of lane `k` where it is not zero
+    /// (`delta`: the lanes' adjoint radiance δL), and returns the radiance
+    /// the log accounts for (the traced radiance, up to rounding).
+    #[inline(always)]
+    fn sweep(
+        &self,
+        delta: V3<Lanes<N>>,
+        mut scatter: impl FnMut(&Vertex<N>, usize, &Hit, Vec3),
+    ) -> V3<Lanes<N>> {
+        // R_{d+1}, the radiance from the next vertex on per unit of its
+        // throughput
+        let mut after = V3::zero();
+        for vertex in self.vertices.iter().rev() {
+            let b = vertex.next_event + after * vertex.survival;
+            after = vertex.emitted + vertex.reflectance.mul_elem(b);
+            let g = delta.mul_elem(vertex.throughput).mul_elem(b);
+            for k in 0..N {
+                if let Some(hit) = &vertex.hits[k] {
+                    let g = lane3(g, k);
+                    if g != Vec3::ZERO {
+                        scatter(vertex, k, hit, g);
+                    }
+                }
+            }
+        }
+        after
+    }
+}
+
+impl<const N: usize> PathLog<N> for Replay<N> {
+    #[inline(always)]
+    fn vertex(&mut self, depth: u32, hits: &[Option<Hit>; N], p: V3<Lanes<N>>, n: &[Vec3; N]) {
+        let v = self.at(depth);
+        (v.hits, v.p, v.n) = (*hits, p, *n);
+    }
+    #[inline(always)]
+    fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
+        let v = self.at(depth);
+        v.emitted += per_throughput();
+    }
+    #[inline(always)]
+    fn next_event(&mut self, depth: u32, per_reflectance: impl FnOnce() -> V3<Lanes<N>>) {
+        self.at(depth).next_event = per_reflectance();
+    }
+    #[inline(always)]
+    fn bounce(
+        &mut self,
+        depth: u32,
+        throughput: V3<Lanes<N>>,
+        reflectance: V3<Lanes<N>>,
+        survival: Lanes<N>,
+    ) {
+        let v = self.at(depth);
+        (v.throughput, v.reflectance, v.survival) = (throughput, reflectance, survival);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diff::prb::{backward_pass, render_backward};
+    use crate::integrator::lanes::lane_width;
+    use crate::integrator::{render, RenderOptions};
+    use crate::params::Seeds;
+    use crate::scene::Scene;
+    use std::path::Path;
+
+    fn scene(name: &str, res: u32, max_depth: u32) -> Scene {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.xml"));
+        let defines = [
+            ("res".to_string(), res.to_string()),
+            ("max_depth".to_string(), max_depth.to_string()),
+        ];
+        Scene::load_file(&path, &defines).unwrap()
+    }
+
+    fn opts(spp: u32, seed: u64) -> RenderOptions {
+        RenderOptions {
+            spp: Some(spp),
+            seed,
+            ..Default::default()
+        }
+    }
+
+    /// `n` numbers in [-1, 1) from a fixed seed (xorshift).
+    fn noise(n: usize, mut state: u64) -> Vec<f32> {
+        (0..n)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+            })
+            .collect()
+    }
+
+    /// The lanes' radiance from the log's factors (the sweep) is the
+    /// radiance the loop traced, lane by lane, on cbox (area light) and
+    /// textured (textures and an environment), roulette included: the
+    /// log misses no contribution and counts none twice.
+    #[test]
+    fn the_sweep_gives_back_the_traced_radiance() {
+        for name in ["cbox", "textured"] {
+            let scene = scene(name, 16, 12);
+            let lanes = LanePath::new(&scene, 4).unwrap();
+            let layout = SampleLayout::new(&scene, &opts(16, 3)).unwrap();
+            let primal = scene.params.primal();
+            let (mut compared, mut lit) = (0, 0);
+            for y in 0..16 {
+                for x in 0..16 {
+                    for first in [0u32, 4, 8, 12] {
+                        let samples: [_; 4] =
+                            std::array::from_fn(|k| layout.camera_sample(x, y, first + k as u32));
+                        let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
+                        let mut rngs = samples.clone().map(|s| s.2);
+                        let mut log = Replay::<4>::default();
+                        let all = LaneMask::<4>::from_fn(|_| true);
+                        let (l, _) = lanes.trace(rays, all, &mut rngs, &mut log);
+                        let swept = log.sweep(V3::zero(), |_, _, _, _| {});
+                        for k in 0..4 {
+                            let (a, b) = (lane3(l, k), lane3(swept, k));
+                            let scale = a.abs().max_element().max(1e-3);
+                            assert!(
+                                (a - b).abs().max_element() <= 1e-5 * scale,
+                                "{name} ({x}, {y}), sample {}: traced {a}, swept {b}",
+                                first + k as u32
+                            );
+                            compared += 1;
+                            lit += (a != Vec3::ZERO) as usize;
+                        }
+                    }
+                }
+            }
+            assert!(lit > compared / 2, "{name}: {lit} of {compared} lit");
+        }
+    }
+
+    /// Where the reverse mode runs in lanes: the scenes and parameters of
+    /// the module documentation, not a camera, a mesh or an emitter.
+    #[test]
+    fn lanes_take_the_reflectances_of_diffuse_mesh_scenes_only() {
+        let takes = |name: &str, key: &str| {
+            let scene = scene(name, 8, 6);
+            let ids = [scene.params.require(key).unwrap()];
+            let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
+            let store = scene.params.view(&seeds);
+            LaneAdjoint::new(&scene, &store, 4).is_some()
+        };
+        assert!(takes("cbox", "red.reflectance.value"));
+        assert!(takes("textured", "plane.bsdf.reflectance.data"));
+        assert!(!takes("cbox", "light.emitter.radiance.value"));
+        assert!(!takes("textured", "env.radiance.value"));
+        assert!(!takes("bsdfs", "ground.bsdf.reflectance.value"));
+    }
+
+    /// The gradient in lanes is the derivative of the image in lanes with
+    /// the same random numbers: for an adjoint image w, g · v against the
+    /// central difference of Σ w · I(θ ± ε v), on cbox (a plain
+    /// reflectance, each channel) and textured (a texture, along a random
+    /// direction over its texels). max_depth 5 keeps the roulette out
+    /// (its survival probability is held fixed by the gradient, not by a
+    /// finite difference). The image is a polynomial in θ, so the
+    /// difference's error is its rounding, bounded by Σ |w| (|I₊| + |I₋|)
+    /// 2·10⁻⁶ / 2ε (a pixel's value carries the rounding of ~32 f32
+    /// operations of relative error 2⁻²⁴ each: the path's products, the
+    /// filter and the sums), plus its truncation, bounded by the change
+    /// from the difference at 2ε (Richardson: the error at ε is a third of
+    /// that change).
+    #[test]
+    fn lane_gradients_are_the_derivatives_of_the_lane_image() {
+        for (name, key, directions) in [
+            ("cbox", "red.reflectance.value", 3),
+            ("textured", "plane.bsdf.reflectance.data", 1),
+        ] {
+            let mut scene = scene(name, 24, 5);
+            let opts = opts(8, 11);
+            let theta = scene.params.data(scene.params.require(key).unwrap()).to_vec();
+            // an adjoint image of one sign: the derivative does not cancel
+            // out over the pixels
+            let w: Vec<f32> = noise(24 * 24 * 3, 5).iter().map(|v| 0.5 * (v + 1.0)).collect();
+            let ids = [scene.params.require(key).unwrap()];
+            let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
+            assert!(
+                LaneAdjoint::new(&scene, &scene.params.view(&seeds), lane_width().unwrap())
+                    .is_some(),
+                "{name}: not the reverse mode in lanes"
+            );
+            let g = render_backward(&scene, &w, Some(&[key]), &opts).unwrap();
+            let g = g.get(key).unwrap().to_vec();
+            for dir in 0..directions {
+                let v: Vec<f32> = if directions == 1 {
+                    noise(theta.len(), 17)
+                } else {
+                    (0..theta.len()).map(|i| (i == dir) as u32 as f32).collect()
+                };
+                // Σ w · I and Σ |w| |I| at θ + t v
+                let mut at = |t: f32| {
+                    let moved: Vec<f32> = theta.iter().zip(&v).map(|(a, b)| a + t * b).collect();
+                    scene.params.set(key, &moved).unwrap();
+                    scene.update().unwrap();
+                    let img = render(&scene, &opts).unwrap().data;
+                    let dot = img.iter().zip(&w).map(|(i, w)| (i * w) as f64).sum::<f64>();
+                    let abs = img.iter().zip(&w).map(|(i, w)| (i * w).abs() as f64).sum::<f64>();
+                    (dot, abs)
+                };
+                let eps = 1e-2f32;
+                let (p1, a1) = at(eps);
+                let (m1, a2) = at(-eps);
+                let (p2, _) = at(2.0 * eps);
+                let (m2, _) = at(-2.0 * eps);
+                let fd = (p1 - m1) / (2.0 * eps as f64);
+                let fd2 = (p2 - m2) / (4.0 * eps as f64);
+                let tol = (a1 + a2) * 2e-6 / (2.0 * eps as f64) + (fd2 - fd).abs();
+                let gv: f64 = g.iter().zip(&v).map(|(g, v)| (g * v) as f64).sum();
+                assert!(
+                    (gv - fd).abs() <= tol,
+                    "{name}, direction {dir}: gradient {gv}, difference {fd} (±{tol})"
+                );
+                // the test resolves the derivative: its tolerance is under
+                // 1 % of it
+                assert!(tol < 0.01 * fd.abs(), "{name}: ±{tol} of {fd}");
+                eprintln!("{name}, direction {dir}: gradient {gv}, difference {fd} (±{tol})");
+            }
+            scene.params.set(key, &theta).unwrap();
+        }
+    }
+
+    /// The reverse mode in lanes and the one on a tape estimate the same
+    /// gradient at full depth, roulette included: the means of 8 runs each
+    /// (other seeds) of cbox's red reflectance and of the per-channel sum
+    /// of textured's texture gradient differ by less than 4.5 standard
+    /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased).
+    /// Their images differ (the two loops' shading frames do), so the
+    /// runs are compared in distribution, not sample by sample.
+    #[test]
+    fn lanes_and_the_tape_estimate_the_same_gradient() {
+        for (name, key) in [
+            ("cbox", "red.reflectance.value"),
+            ("textured", "plane.bsdf.reflectance.data"),
+        ] {
+            let scene = scene(name, 24, 12);
+            let w: Vec<f32> = noise(24 * 24 * 3, 9).iter().map(|v| 0.5 * (v + 1.0)).collect();
+            let ids = [scene.params.require(key).unwrap()];
+            let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
+            let store = scene.params.view(&seeds);
+            let lanes = LaneAdjoint::new(&scene, &store, lane_width().unwrap()).unwrap();
+            let per_channel = |lanes: Option<&LaneAdjoint>, seed: u64| -> [f64; 3] {
+                let opts = scene
+                    .integrator
+                    .derivative_options(&scene, &opts(16, seed))
+                    .unwrap();
+                let (sums, non_finite) = backward_pass(&scene, &store, &w, &opts, lanes).unwrap();
+                assert_eq!(non_finite, 0);
+                let g = &sums[ids[0].0 as usize];
+                std::array::from_fn(|c| g.iter().skip(c).step_by(3).sum())
+            };
+            let runs = |lanes: Option<&LaneAdjoint>, seed0: u64| -> Vec<[f64; 3]> {
+                (0..8).map(|i| per_channel(lanes, seed0 + i)).collect()
+            };
+            let a = runs(Some(&lanes), 100);
+            let b = runs(None, 200);
+            for c in 0..3 {
+                let stats = |r: &[[f64; 3]]| {
+                    let n = r.len() as f64;
+                    let mean = r.iter().map(|v| v[c]).sum::<f64>() / n;
+                    let var = r.iter().map(|v| (v[c] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+                    (mean, var / n)
+                };
+                let ((ma, va), (mb, vb)) = (stats(&a), stats(&b));
+                let t = (ma - mb) / (va + vb).sqrt();
+                eprintln!("{name}, channel {c}: lanes {ma}, tape {mb}, t = {t}");
+                assert!(
+                    t.abs() < 4.5,
+                    "{name}, channel {c}: lanes {ma}, tape {mb}, t = {t}"
+                );
+                // the comparison resolves a 5 % bias
+                assert!(
+                    4.5 * (va + vb).sqrt() < 0.05 * mb.abs(),
+                    "{name}, channel {c}: 4.5 se = {} of {mb}",
+                    4.5 * (va + vb).sqrt()
+                );
+            }
+        }
+    }
+}
