@@ -314,26 +314,26 @@ pub(super) fn backward_pass(
             non_finite = lanes.tile(&layout, tile, &adjoint, &mut grads);
         } else {
             layout.for_each_sample(tile, |pos, cs, rng| {
-            let delta = adjoint.gather(filter, pos.x, pos.y);
-            if delta == [0.0; 3] {
-                return;
-            }
-            clear_tape();
-            let l = scene
-                .integrator
-                .radiance::<Var>(scene, store, cs, rng)
-                .expect("path and direct integrators estimate radiance");
-            if !l.val().is_finite() {
-                non_finite += 1;
+                let delta = adjoint.gather(filter, pos.x, pos.y);
+                if delta == [0.0; 3] {
+                    return;
+                }
                 clear_tape();
-                return;
-            }
-            // `backward` hands over finite values only
-            backward(
-                &[(l.x, delta[0]), (l.y, delta[1]), (l.z, delta[2])],
-                |id, i, g| grads.add(id, i, g),
-            );
-        });
+                let l = scene
+                    .integrator
+                    .radiance::<Var>(scene, store, cs, rng)
+                    .expect("path and direct integrators estimate radiance");
+                if !l.val().is_finite() {
+                    non_finite += 1;
+                    clear_tape();
+                    return;
+                }
+                // `backward` hands over finite values only
+                backward(
+                    &[(l.x, delta[0]), (l.y, delta[1]), (l.z, delta[2])],
+                    |id, i, g| grads.add(id, i, g),
+                );
+            });
         }
         let sums = grads.take();
         spare.lock().unwrap().push(grads);

@@ -231,7 +231,8 @@ impl<'a> LaneAdjoint<'a> {
             if let (Some(Reflectance::Uniform(texture)), false) =
                 (self.reflectance[shape], *g == DVec3::ZERO)
             {
-                let si = surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, shape as u32, 0);
+                let si =
+                    surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, shape as u32, 0);
                 self.scatter(texture, &si, g.as_vec3(), sums);
             }
         }
@@ -369,6 +370,7 @@ impl<const N: usize> PathLog<N> for Replay<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ad::lanes::widest_lanes;
     use crate::diff::prb::{backward_pass, render_backward};
     use crate::integrator::lanes::lane_width;
     use crate::integrator::{render, RenderOptions};
@@ -485,10 +487,16 @@ mod tests {
         ] {
             let mut scene = scene(name, 24, 5);
             let opts = opts(8, 11);
-            let theta = scene.params.data(scene.params.require(key).unwrap()).to_vec();
+            let theta = scene
+                .params
+                .data(scene.params.require(key).unwrap())
+                .to_vec();
             // an adjoint image of one sign: the derivative does not cancel
             // out over the pixels
-            let w: Vec<f32> = noise(24 * 24 * 3, 5).iter().map(|v| 0.5 * (v + 1.0)).collect();
+            let w: Vec<f32> = noise(24 * 24 * 3, 5)
+                .iter()
+                .map(|v| 0.5 * (v + 1.0))
+                .collect();
             let ids = [scene.params.require(key).unwrap()];
             let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
             assert!(
@@ -511,7 +519,11 @@ mod tests {
                     scene.update().unwrap();
                     let img = render(&scene, &opts).unwrap().data;
                     let dot = img.iter().zip(&w).map(|(i, w)| (i * w) as f64).sum::<f64>();
-                    let abs = img.iter().zip(&w).map(|(i, w)| (i * w).abs() as f64).sum::<f64>();
+                    let abs = img
+                        .iter()
+                        .zip(&w)
+                        .map(|(i, w)| (i * w).abs() as f64)
+                        .sum::<f64>();
                     (dot, abs)
                 };
                 let eps = 1e-2f32;
@@ -530,7 +542,6 @@ mod tests {
                 // the test resolves the derivative: its tolerance is under
                 // 1 % of it
                 assert!(tol < 0.01 * fd.abs(), "{name}: ±{tol} of {fd}");
-                eprintln!("{name}, direction {dir}: gradient {gv}, difference {fd} (±{tol})");
             }
             scene.params.set(key, &theta).unwrap();
         }
@@ -540,7 +551,8 @@ mod tests {
     /// gradient at full depth, roulette included: the means of 8 runs each
     /// (other seeds) of cbox's red reflectance and of the per-channel sum
     /// of textured's texture gradient differ by less than 4.5 standard
-    /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased).
+    /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased),
+    /// at every width this processor runs.
     /// Their images differ (the two loops' shading frames do), so the
     /// runs are compared in distribution, not sample by sample.
     #[test]
@@ -550,11 +562,14 @@ mod tests {
             ("textured", "plane.bsdf.reflectance.data"),
         ] {
             let scene = scene(name, 24, 12);
-            let w: Vec<f32> = noise(24 * 24 * 3, 9).iter().map(|v| 0.5 * (v + 1.0)).collect();
+            let w: Vec<f32> = noise(24 * 24 * 3, 9)
+                .iter()
+                .map(|v| 0.5 * (v + 1.0))
+                .collect();
             let ids = [scene.params.require(key).unwrap()];
             let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
             let store = scene.params.view(&seeds);
-            let lanes = LaneAdjoint::new(&scene, &store, lane_width().unwrap()).unwrap();
+
             let per_channel = |lanes: Option<&LaneAdjoint>, seed: u64| -> [f64; 3] {
                 let opts = scene
                     .integrator
@@ -568,28 +583,34 @@ mod tests {
             let runs = |lanes: Option<&LaneAdjoint>, seed0: u64| -> Vec<[f64; 3]> {
                 (0..8).map(|i| per_channel(lanes, seed0 + i)).collect()
             };
-            let a = runs(Some(&lanes), 100);
             let b = runs(None, 200);
-            for c in 0..3 {
-                let stats = |r: &[[f64; 3]]| {
-                    let n = r.len() as f64;
-                    let mean = r.iter().map(|v| v[c]).sum::<f64>() / n;
-                    let var = r.iter().map(|v| (v[c] - mean).powi(2)).sum::<f64>() / (n - 1.0);
-                    (mean, var / n)
-                };
-                let ((ma, va), (mb, vb)) = (stats(&a), stats(&b));
-                let t = (ma - mb) / (va + vb).sqrt();
-                eprintln!("{name}, channel {c}: lanes {ma}, tape {mb}, t = {t}");
-                assert!(
-                    t.abs() < 4.5,
-                    "{name}, channel {c}: lanes {ma}, tape {mb}, t = {t}"
-                );
-                // the comparison resolves a 5 % bias
-                assert!(
-                    4.5 * (va + vb).sqrt() < 0.05 * mb.abs(),
-                    "{name}, channel {c}: 4.5 se = {} of {mb}",
-                    4.5 * (va + vb).sqrt()
-                );
+            // every width this processor runs
+            for width in [4, 8, 16]
+                .into_iter()
+                .filter(|&w| w == 4 || w <= widest_lanes())
+            {
+                let lanes = LaneAdjoint::new(&scene, &store, width).unwrap();
+                let a = runs(Some(&lanes), 100);
+                for c in 0..3 {
+                    let stats = |r: &[[f64; 3]]| {
+                        let n = r.len() as f64;
+                        let mean = r.iter().map(|v| v[c]).sum::<f64>() / n;
+                        let var = r.iter().map(|v| (v[c] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+                        (mean, var / n)
+                    };
+                    let ((ma, va), (mb, vb)) = (stats(&a), stats(&b));
+                    let t = (ma - mb) / (va + vb).sqrt();
+                    assert!(
+                        t.abs() < 4.5,
+                        "{name}, {width} lanes, channel {c}: lanes {ma}, tape {mb}, t = {t}"
+                    );
+                    // the comparison resolves a 5 % bias
+                    assert!(
+                        4.5 * (va + vb).sqrt() < 0.05 * mb.abs(),
+                        "{name}, {width} lanes, channel {c}: 4.5 se = {} of {mb}",
+                        4.5 * (va + vb).sqrt()
+                    );
+                }
             }
         }
     }

@@ -583,11 +583,7 @@ impl<'a> LanePath<'a> {
             throughput = throughput.mul_elem(reflectance);
             let (survives, q) =
                 survival_probability(throughput.max_elem(), 1.0, depth, path.rr_depth, u_rr);
-            let survival = if depth >= path.rr_depth {
-                one / q
-            } else {
-                one
-            };
+            let survival = if depth >= path.rr_depth { one / q } else { one };
             if depth >= path.rr_depth {
                 throughput *= survival;
             }
@@ -641,15 +637,22 @@ pub(crate) fn lane3<const N: usize>(v: V3<Lanes<N>>, k: usize) -> Vec3 {
 
 /// How many lanes the path tracer in lanes runs: `PENUMBRA_LANES` where
 /// it is set (a development switch for measurements: 1 for the scalar
-/// loop, or 4, 8, 16 where the processor has them), else the widest this
-/// processor has (16 with AVX-512, 8 with AVX2 and FMA, else 4).
+/// loop, or 4, 8, 16 where the processor has them), else 4.
+///
+/// Four, not the widest the processor has: a block's lanes are one
+/// pixel's samples, and the block runs until its longest path ends, so
+/// the wider the block, the more of its lane-vertices belong to paths
+/// that have ended (cbox, 256², 64 spp: 33 % at 4 lanes, 39 % at 8, 43 %
+/// at 16); and most of the loop's work is per lane (traversal, light
+/// samples, texture look-ups), which a wider register does not shorten.
+/// Measured on an Intel Xeon with AVX-512 (docs/perf/lanes.md, "The
+/// width"): 4 lanes render cbox in 0.79 of the time of 16 and 0.92 of 8,
+/// textured in 0.86 of 16, mesh_heavy in 0.95.
 pub(crate) fn lane_width() -> Result<usize> {
-    let widest = match widest_lanes() {
-        1 => 4,
-        w => w,
-    };
+    const DEFAULT: usize = 4;
+    let widest = widest_lanes().max(DEFAULT);
     let Ok(v) = std::env::var("PENUMBRA_LANES") else {
-        return Ok(widest);
+        return Ok(DEFAULT);
     };
     match v.trim().parse::<usize>() {
         Ok(w @ (1 | 4)) => Ok(w),
