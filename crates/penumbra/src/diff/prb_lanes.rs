@@ -165,7 +165,6 @@ impl<'a> LaneAdjoint<'a> {
     ) -> usize {
         let scene = self.lanes.scene();
         let filter = &layout.sensor.film.rfilter;
-        let primal = scene.params.primal();
         let mut log = Replay::<N>::default();
         // per shape, the adjoints of a uniform reflectance over the tile
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
@@ -176,19 +175,16 @@ impl<'a> LaneAdjoint<'a> {
                 while first < layout.spp {
                     let count = ((layout.spp - first) as usize).min(N);
                     // lanes past `count` repeat the last sample, inactive
-                    let samples: [_; N] = std::array::from_fn(|k| {
-                        layout.camera_sample(x, y, first + k.min(count - 1) as u32)
-                    });
+                    let (pos, rays, mut rngs) =
+                        self.lanes.camera_lanes::<N>(layout, x, y, first, count);
                     first += count as u32;
                     let delta: [[f32; 3]; N] =
-                        each_lane(|k| adjoint.gather(filter, samples[k].0.x, samples[k].0.y));
+                        each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
                     // a sample without adjoint radiance is not traced
                     let active = LaneMask::<N>::from_fn(|k| k < count && delta[k] != [0.0; 3]);
                     if active.none() {
                         continue;
                     }
-                    let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
-                    let mut rngs = samples.clone().map(|s| s.2);
                     log.vertices.clear();
                     let (l, _) = self.lanes.trace(rays, active, &mut rngs, &mut log);
                     // samples with a non-finite radiance are left out

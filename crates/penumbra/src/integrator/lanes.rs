@@ -292,19 +292,15 @@ impl<'a> LanePath<'a> {
                 while first < layout.spp {
                     let count = ((layout.spp - first) as usize).min(N);
                     // lanes past `count` repeat the last sample, inactive
-                    let samples: [_; N] = std::array::from_fn(|k| {
-                        layout.camera_sample(x, y, first + k.min(count - 1) as u32)
-                    });
-                    let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&self.store).val());
-                    let mut rngs = samples.clone().map(|s| s.2);
+                    let (pos, rays, mut rngs) = self.camera_lanes::<N>(layout, x, y, first, count);
                     let active = LaneMask::<N>::from_fn(|k| k < count);
                     let (l, hit) = self.trace(rays, active, &mut rngs, &mut ());
                     // samples with a non-finite value are left out
                     let finite = l.x.finite() & l.y.finite() & l.z.finite();
                     let keep = each_lane(|k| active.lane(k) && finite.lane(k));
                     non_finite += count - keep.iter().filter(|&&k| k).count();
-                    let px = each_lane(|k| samples[k].0.x);
-                    let py = each_lane(|k| samples[k].0.y);
+                    let px = each_lane(|k| pos[k].x);
+                    let py = each_lane(|k| pos[k].y);
                     let rgb = [l.x.0, l.y.0, l.z.0];
                     if alpha {
                         let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
@@ -318,6 +314,25 @@ impl<'a> LanePath<'a> {
             }
         }
         non_finite
+    }
+
+    /// Samples `first..first + count` of pixel `(x, y)` in `N` lanes (the
+    /// lanes past `count` repeat the last one): their film positions in
+    /// pixels, camera rays and streams of random numbers.
+    #[inline(always)]
+    pub(crate) fn camera_lanes<const N: usize>(
+        &self,
+        layout: &SampleLayout,
+        x: i64,
+        y: i64,
+        first: u32,
+        count: usize,
+    ) -> ([Vec2; N], [Ray; N], [SampleStream; N]) {
+        let samples: [_; N] =
+            std::array::from_fn(|k| layout.camera_sample(x, y, first + k.min(count - 1) as u32));
+        let pos = each_lane(|k| samples[k].0);
+        let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&self.store).val());
+        (pos, rays, samples.map(|s| s.2))
     }
 
     /// [`PathIntegrator::trace`] from the camera rays `rays` in the lanes
