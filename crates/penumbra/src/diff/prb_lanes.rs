@@ -207,6 +207,15 @@ impl<'a> LaneAdjoint<'a> {
                                 // the look-up of the primal pass, on Vars
                                 let mesh = self.lanes.mesh(hit.shape);
                                 let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
+                                if let Texture::Bitmap(bitmap) = texture {
+                                    if !self.store.is_recorded(bitmap.to_uv) {
+                                        // texels alone: their weights, no tape
+                                        bitmap.scatter_adjoint(self.store, uv, g, |i, d| {
+                                            sums.add(bitmap.data, i, d)
+                                        });
+                                        return;
+                                    }
+                                }
                                 let p = lane3(vertex.p, k);
                                 let si = surface_si::<Var>(
                                     p,

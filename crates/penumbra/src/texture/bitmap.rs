@@ -282,6 +282,50 @@ impl Bitmap {
         ]
     }
 
+    /// The adjoint of [`Bitmap::eval`] where only the texels are recorded
+    /// (`to_uv` is not, so the uv and the filter's weights are constants):
+    /// `add(element, w · g_c)` for each texel element the look-up at `uv`
+    /// reads with weight `w`, channel c's adjoint being `g_c`. The
+    /// transpose of [`Bitmap::lookup_primal`], term for term, so the same
+    /// sums as reverse mode through [`Bitmap::lookup`] on a tape, without
+    /// one (reverse mode in lanes, `diff/prb_lanes.rs`).
+    pub(crate) fn scatter_adjoint(
+        &self,
+        store: &ParamView,
+        uv: Vec2,
+        g: Vec3,
+        mut add: impl FnMut(usize, f32),
+    ) {
+        debug_assert!(!store.is_recorded(self.to_uv));
+        let uv = apply_to_uv::<f32>(store, self.to_uv, V2::cst(uv)).val();
+        let (w, h) = (self.width, self.height);
+        let mut texel = |i: usize, weight: f32| {
+            if self.channels == 3 {
+                for (c, g) in g.to_array().into_iter().enumerate() {
+                    add(3 * i + c, g * weight);
+                }
+            } else {
+                // one value read into the three channels
+                add(i, (g.x + g.y + g.z) * weight);
+            }
+        };
+        match self.filter {
+            FilterType::Nearest => {
+                let x = floor_i64(uv.x * w as f32);
+                let y = floor_i64(uv.y * h as f32);
+                texel(self.wrap.wrap(y, h) * w + self.wrap.wrap(x, w), 1.0);
+            }
+            FilterType::Bilinear => {
+                let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
+                for (i, weight) in self.bilinear_terms(taps, fx, fy) {
+                    if weight != 0.0 {
+                        texel(i, weight);
+                    }
+                }
+            }
+        }
+    }
+
     /// [`Bitmap::lookup`] without derivatives, reading the texels `data`
     /// directly (the same arithmetic as a lookup whose uv does not move).
     fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
@@ -551,6 +595,40 @@ mod tests {
         let seeds = Seeds::tangents(&ctx.store, &[("tex.data", &t)]).unwrap();
         let l = b.eval_1::<Dual>(&ctx.store.view(&seeds), &si_at_uv(u, v));
         assert!((l.d - 0.56 * 0.715160).abs() < 1e-5, "{l:?}");
+    }
+
+    /// The tape-free adjoint of a look-up is the transpose of its
+    /// derivative: for every texel element e, the scattered adjoint equals
+    /// g · ∂value/∂e from forward mode (one tangent per element), for both
+    /// filters, wrap modes that fold back, a `to_uv` transform, and uvs on
+    /// texel centres (zero weights) and outside [0, 1].
+    #[test]
+    fn scattered_adjoints_are_the_transposed_derivatives() {
+        let g = Vec3::new(0.3, -1.7, 2.1);
+        let to_uv = Transform::scale(Vec3::new(2.0, 1.0, 1.0));
+        for filter in [FilterType::Bilinear, FilterType::Nearest] {
+            for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
+                let (b, ctx) = make(filter, wrap, to_uv);
+                let recorded = Seeds::recorded(&ctx.store, &[b.data]).unwrap();
+                let store = ctx.store.view(&recorded);
+                let n = 4 * 3 * 3;
+                for (u, v) in [(0.2, 0.3), (0.0625, 1.0 / 6.0), (-0.4, 1.3), (0.99, 0.01)] {
+                    let mut scattered = vec![0.0f32; n];
+                    b.scatter_adjoint(&store, Vec2::new(u, v), g, |i, d| scattered[i] += d);
+                    for (e, &got) in scattered.iter().enumerate() {
+                        let mut t = vec![0.0; n];
+                        t[e] = 1.0;
+                        let seeds = Seeds::tangents(&ctx.store, &[("tex.data", &t)]).unwrap();
+                        let r = b.eval::<Dual>(&ctx.store.view(&seeds), &si_at_uv(u, v));
+                        let want = g.x * r.x.d + g.y * r.y.d + g.z * r.z.d;
+                        assert!(
+                            (got - want).abs() < 1e-5,
+                            "{filter:?} {wrap:?} uv ({u}, {v}) element {e}: {got} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     fn write_png8(path: &std::path::Path, px: &[u8], w: u32, h: u32) {
