@@ -26,6 +26,7 @@ use super::{
     delta_shadow_boundary, primary_boundary, shadow_boundary, warn_missing_boundary_terms,
     BoundaryTerms,
 };
+use crate::ad::lanes::each_lane;
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
@@ -35,6 +36,7 @@ use crate::integrator::render::{report_non_finite, SampleLayout};
 use crate::integrator::RenderOptions;
 use crate::params::{ParamId, ParamView, Seeds};
 use crate::scene::Scene;
+use glam::Vec2;
 use std::borrow::Cow;
 use std::sync::Mutex;
 
@@ -279,7 +281,22 @@ pub(super) fn backward_pass(
     // 1. total filter weight per pixel (positions only: no tracing)
     let weight_blocks = layout.map_tiles(opts, |tile| {
         let mut block = layout.tile_block(tile, 0);
-        layout.for_each_sample(tile, |pos, _, _| block.put(filter, pos.x, pos.y, &[]));
+        // a pixel's samples eight at a time: each pixel they reach is
+        // updated once per eight, not once per sample
+        const N: usize = 8;
+        for y in tile.y0..tile.y0 + tile.h {
+            for x in tile.x0..tile.x0 + tile.w {
+                for first in (0..layout.spp).step_by(N) {
+                    let pos: [Vec2; N] = each_lane(|k| {
+                        let s = (first + k as u32).min(layout.spp - 1);
+                        layout.camera_sample(x, y, s).0
+                    });
+                    let keep = each_lane(|k| first + (k as u32) < layout.spp);
+                    let (px, py) = (pos.map(|p| p.x), pos.map(|p| p.y));
+                    block.put_lanes::<N, 0>(filter, px, py, [], keep);
+                }
+            }
+        }
         block
     })?;
     let mut weights = ImageBlock::new(0, 0, cw, ch, 0);
