@@ -30,7 +30,9 @@
 //! Each vertex's adjoint δL ⊙ β_d ⊙ B_d reaches the parameters through the
 //! reflectance's own code evaluated on [`Var`]s: a texture per vertex, at
 //! the point the primal pass looked it up; a plain value once per tile for
-//! the sum of its adjoints. Scenes or parameters outside this take the
+//! the sum of its adjoints. A bitmap whose `to_uv` is not recorded skips
+//! the tape: its look-up's weights are constants, and
+//! `Bitmap::scatter_adjoint` hands each texel its share directly. Scenes or parameters outside this take the
 //! scalar reverse mode of `prb.rs`, which records whole paths.
 
 use super::prb::TileSums;
@@ -205,6 +207,7 @@ impl<'a> LaneAdjoint<'a> {
                             }
                             Some(Reflectance::Varying(texture)) => {
                                 // the look-up of the primal pass, on Vars
+                                // (a bitmap's texels without them)
                                 let mesh = self.lanes.mesh(hit.shape);
                                 let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
                                 if let Texture::Bitmap(bitmap) = texture {
