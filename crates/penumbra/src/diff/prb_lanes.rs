@@ -32,8 +32,9 @@
 //! the point the primal pass looked it up; a plain value once per tile for
 //! the sum of its adjoints. A bitmap whose `to_uv` is not recorded skips
 //! the tape: its look-up's weights are constants, and
-//! `Bitmap::scatter_adjoint` hands each texel its share directly. Scenes or parameters outside this take the
-//! scalar reverse mode of `prb.rs`, which records whole paths.
+//! `Bitmap::scatter_adjoint` hands each texel its share directly. Scenes
+//! or parameters outside this take the scalar reverse mode of `prb.rs`,
+//! which records whole paths.
 
 use super::prb::TileSums;
 use crate::ad::lanes::{each_lane, LaneMask, Lanes};

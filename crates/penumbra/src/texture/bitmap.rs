@@ -298,7 +298,6 @@ impl Bitmap {
     ) {
         debug_assert!(!store.is_recorded(self.to_uv));
         let uv = apply_to_uv::<f32>(store, self.to_uv, V2::cst(uv)).val();
-        let (w, h) = (self.width, self.height);
         let mut texel = |i: usize, weight: f32| {
             if self.channels == 3 {
                 for (c, g) in g.to_array().into_iter().enumerate() {
@@ -310,11 +309,7 @@ impl Bitmap {
             }
         };
         match self.filter {
-            FilterType::Nearest => {
-                let x = floor_i64(uv.x * w as f32);
-                let y = floor_i64(uv.y * h as f32);
-                texel(self.wrap.wrap(y, h) * w + self.wrap.wrap(x, w), 1.0);
-            }
+            FilterType::Nearest => texel(self.nearest(uv), 1.0),
             FilterType::Bilinear => {
                 let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
                 for (i, weight) in self.bilinear_terms(taps, fx, fy) {
@@ -326,10 +321,17 @@ impl Bitmap {
         }
     }
 
+    /// The texel (row-major index) nearest filtering reads at `uv`.
+    fn nearest(&self, uv: Vec2) -> usize {
+        let (w, h) = (self.width, self.height);
+        let x = floor_i64(uv.x * w as f32);
+        let y = floor_i64(uv.y * h as f32);
+        self.wrap.wrap(y, h) * w + self.wrap.wrap(x, w)
+    }
+
     /// [`Bitmap::lookup`] without derivatives, reading the texels `data`
     /// directly (the same arithmetic as a lookup whose uv does not move).
     fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
-        let (w, h) = (self.width, self.height);
         // texel i (row-major), its channels read as one vector
         let texel = |i: usize| {
             if self.channels == 3 {
@@ -339,11 +341,7 @@ impl Bitmap {
             }
         };
         match self.filter {
-            FilterType::Nearest => {
-                let x = floor_i64(uv.x * w as f32);
-                let y = floor_i64(uv.y * h as f32);
-                texel(self.wrap.wrap(y, h) * w + self.wrap.wrap(x, w))
-            }
+            FilterType::Nearest => texel(self.nearest(uv)),
             FilterType::Bilinear => {
                 let (taps, fx, fy) = self.bilinear_taps::<f32>(V2::cst(uv));
                 // [`crate::ad::weighted_sum`] per channel, texel by texel: the same
