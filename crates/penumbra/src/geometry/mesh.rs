@@ -644,6 +644,23 @@ impl Mesh {
         tc(i0) * (1.0 - b.x - b.y) + tc(i1) * b.x + tc(i2) * b.y
     }
 
+    /// The point of [`ShapeT::sample_position`] for `u`: its triangle,
+    /// barycentrics, position and normal, without the uv the lanes' light
+    /// samples do not read.
+    #[inline(always)]
+    pub(crate) fn sample_point(&self, store: &ParamStore, u: Vec2) -> (usize, Vec2, Vec3, Vec3) {
+        let (f, b) = match &self.quad {
+            Some(quad) => quad.sample(u),
+            None => {
+                let (f, _, ux) = self.area_distr.sample_reuse(u.x);
+                (f, warp::square_to_uniform_triangle(Vec2::new(ux, u.y)))
+            }
+        };
+        let [p0, p1, p2] = self.triangle(store, f);
+        let b0 = 1.0 - b.x - b.y;
+        (f, b, p0 * b0 + p1 * b.x + p2 * b.y, self.face_n[f])
+    }
+
     /// The corners of triangle `prim` as the path tracer in lanes reads
     /// them for a primal hit (it interpolates them itself, many hits at
     /// once): the positions, the shading normals at the corners (the
@@ -847,19 +864,10 @@ impl ShapeT for Mesh {
     /// `QuadSampling`); the density is 1 / total area.
     #[inline]
     fn sample_position(&self, store: &ParamStore, u: Vec2) -> PositionSample {
-        let (f, b) = match &self.quad {
-            Some(quad) => quad.sample(u),
-            None => {
-                let (f, _, ux) = self.area_distr.sample_reuse(u.x);
-                (f, warp::square_to_uniform_triangle(Vec2::new(ux, u.y)))
-            }
-        };
-        let [p0, p1, p2] = self.triangle(store, f);
-        let b0 = 1.0 - b.x - b.y;
-        let p = p0 * b0 + p1 * b.x + p2 * b.y;
+        let (f, b, p, n) = self.sample_point(store, u);
         PositionSample {
             p,
-            n: self.face_n[f],
+            n,
             uv: self.uv_primal(store, f as u32, b),
             local: b,
             pdf: 1.0 / self.area,
