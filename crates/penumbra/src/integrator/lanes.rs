@@ -340,11 +340,18 @@ impl<'a> LanePath<'a> {
         first: u32,
         count: usize,
     ) -> ([Vec2; N], [Ray; N], [SampleStream; N]) {
-        let samples: [_; N] =
-            std::array::from_fn(|k| layout.camera_sample(x, y, first + k.min(count - 1) as u32));
-        let pos = each_lane(|k| samples[k].0);
-        let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&self.store).val());
-        (pos, rays, samples.map(|s| s.2))
+        // filled lane by lane, not through `std::array::from_fn`, whose
+        // closures were left out of line, without the lanes' target
+        // features; the pixel's key hashed once
+        let key = layout.pixel_key(x, y);
+        let mut pos = [Vec2::ZERO; N];
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); N];
+        let mut rngs = [SampleStream::PLACEHOLDER; N];
+        for k in 0..N {
+            let (p, cs, rng) = layout.camera_sample_of(x, y, key, first + k.min(count - 1) as u32);
+            (pos[k], rays[k], rngs[k]) = (p, cs.ray::<f32>(&self.store).val(), rng);
+        }
+        (pos, rays, rngs)
     }
 
     /// [`PathIntegrator::trace`] from the camera rays `rays` in the lanes

@@ -289,10 +289,31 @@ impl<'a> SampleLayout<'a> {
     /// camera sample and the stream of its further random numbers.
     #[inline(always)]
     pub fn camera_sample(&self, x: i64, y: i64, s: u32) -> (Vec2, CameraSample<'a>, SampleStream) {
-        let sensor = self.sensor;
+        self.camera_sample_of(x, y, self.pixel_key(x, y), s)
+    }
+
+    /// The hash every sample stream of pixel `(x, y)` starts from, for
+    /// [`SampleLayout::camera_sample_of`].
+    #[inline(always)]
+    pub fn pixel_key(&self, x: i64, y: i64) -> u64 {
         // a key per film pixel (border pixels included)
         let pixel = ((y + 0x8000) as u64) << 32 | (x + 0x8000) as u64;
-        let mut rng = sensor.sampler.stream(self.seed, pixel, s, self.spp);
+        self.sensor.sampler.pixel_key(self.seed, pixel)
+    }
+
+    /// [`SampleLayout::camera_sample`] of the pixel whose
+    /// [`SampleLayout::pixel_key`] is `key`: for loops that take a pixel's
+    /// samples together and hash its key once.
+    #[inline(always)]
+    pub fn camera_sample_of(
+        &self,
+        x: i64,
+        y: i64,
+        key: u64,
+        s: u32,
+    ) -> (Vec2, CameraSample<'a>, SampleStream) {
+        let sensor = self.sensor;
+        let mut rng = sensor.sampler.stream_of(key, s, self.spp);
         let u = rng.next_2d();
         let pos = Vec2::new(x as f32 + u.x, y as f32 + u.y);
         let lens_u = if self.lens { rng.next_2d() } else { Vec2::ZERO };

@@ -139,7 +139,21 @@ impl Sampler {
     /// of samples taken in this pass (stratification is over them).
     #[inline]
     pub fn stream(&self, seed: u64, pixel: u64, index: u32, spp: u32) -> SampleStream {
-        let key = mix64(mix64(seed.wrapping_add(self.seed())) ^ pixel);
+        self.stream_of(self.pixel_key(seed, pixel), index, spp)
+    }
+
+    /// The hash of (seed, pixel) that every sample stream of the pixel
+    /// starts from: computed once per pixel by loops that take its
+    /// samples together ([`Sampler::stream_of`]).
+    #[inline(always)]
+    pub fn pixel_key(&self, seed: u64, pixel: u64) -> u64 {
+        mix64(mix64(seed.wrapping_add(self.seed())) ^ pixel)
+    }
+
+    /// [`Sampler::stream`] of the pixel whose [`Sampler::pixel_key`] is
+    /// `key`.
+    #[inline(always)]
+    pub fn stream_of(&self, key: u64, index: u32, spp: u32) -> SampleStream {
         SampleStream {
             key,
             index,
@@ -197,6 +211,19 @@ pub struct SampleStream {
     spp: u32,
     dim: u32,
     pattern: Pattern,
+}
+
+impl SampleStream {
+    /// A stream that holds an array's place until the array is filled
+    /// (the streams of a block of lanes, `[PLACEHOLDER; N]`, written lane
+    /// by lane without building the array through closures).
+    pub(crate) const PLACEHOLDER: SampleStream = SampleStream {
+        key: 0,
+        index: 0,
+        spp: 1,
+        dim: 0,
+        pattern: Pattern::Independent { state: 0 },
+    };
 }
 
 impl SampleStream {
