@@ -29,6 +29,14 @@ impl Constant {
             bounds: BoundingSphere::default(),
         })
     }
+
+    /// The direction of the sample for `u` and its density per solid
+    /// angle: uniform on the sphere. (The path tracer in lanes samples a
+    /// constant of plain radiance with it, without an emitter sample.)
+    #[inline(always)]
+    pub(crate) fn sample_direction_primal(u: Vec2) -> (Vec3, f32) {
+        (warp::square_to_uniform_sphere(u), warp::UNIFORM_SPHERE_PDF)
+    }
 }
 
 impl EmitterT for Constant {
@@ -39,8 +47,7 @@ impl EmitterT for Constant {
         ref_p: V3<R>,
         u: Vec2,
     ) -> Option<EmitterSample<R>> {
-        let d = warp::square_to_uniform_sphere(u);
-        let pdf = warp::UNIFORM_SPHERE_PDF;
+        let (d, pdf) = Constant::sample_direction_primal(u);
         let ds = DirectionSample {
             p: far_point(&self.bounds, ref_p.val(), d),
             n: -d,

@@ -24,7 +24,7 @@ use super::{mis_weight, survival_probability, Integrator};
 use crate::ad::lanes::{each_lane, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::bsdf::{lambert_eval, lambert_pdf, lambert_sample, Bsdf};
-use crate::emitter::{surface_si, Emitter, EmitterT};
+use crate::emitter::{surface_si, Constant, Emitter, EmitterT};
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
@@ -55,6 +55,20 @@ struct MeshLight<'a> {
     /// Density of the points [`Scene::sample_emitter`] draws on it, per
     /// unit area: the emitter's selection probability over the mesh's area.
     pdf_area: f32,
+}
+
+/// How the loop draws an emitter's light samples.
+#[derive(Clone, Copy)]
+enum LaneLight<'a> {
+    /// An `area` light of a mesh: a point on it, the direction and
+    /// density in lanes.
+    Mesh(MeshLight<'a>),
+    /// A `constant` environment of plain radiance, picked with
+    /// probability `pick`: a direction, its density and weight without
+    /// an emitter sample (the values of [`Scene::sample_emitter`]).
+    Constant { radiance: Vec3, pick: f32 },
+    /// Any other emitter: its own code, lane by lane.
+    Other,
 }
 
 /// What a caller of [`LanePath::trace`] learns of each path beyond its
@@ -152,9 +166,8 @@ pub(crate) struct LanePath<'a> {
     store: ParamView<'a>,
     path: &'a PathIntegrator,
     shapes: Vec<LaneShape<'a>>,
-    /// Per emitter, the area light of a mesh it is (sampled in lanes), or
-    /// `None` for the emitters sampled by their own code, lane by lane.
-    lights: Vec<Option<MeshLight<'a>>>,
+    /// Per emitter, how its light samples are drawn.
+    lights: Vec<LaneLight<'a>>,
     /// Lanes per call: 16, 8, 4 or 1 (the last: the scalar loop instead).
     width: usize,
 }
@@ -221,9 +234,19 @@ impl<'a> LanePath<'a> {
         let lights = scene
             .emitters
             .iter()
-            .map(|emitter| match emitter {
-                Emitter::Area(area) => shapes[area.shape as usize].emission,
-                _ => None,
+            .enumerate()
+            .map(|(em, emitter)| match emitter {
+                Emitter::Area(area) => shapes[area.shape as usize]
+                    .emission
+                    .map_or(LaneLight::Other, LaneLight::Mesh),
+                Emitter::Constant(constant) => match value(&constant.radiance) {
+                    Ok(radiance) => LaneLight::Constant {
+                        radiance,
+                        pick: pick(em as u32),
+                    },
+                    Err(_) => LaneLight::Other,
+                },
+                _ => LaneLight::Other,
             })
             .collect();
         Some(LanePath {
@@ -513,7 +536,7 @@ impl<'a> LanePath<'a> {
             let mut yn = [Vec3::Z; N];
             let mut y_pdf = [0.0; N];
             let mut y_le = [Vec3::ZERO; N];
-            // lanes whose emitter sampled itself: the sample's direction,
+            // lanes whose emitter is not a mesh: the sample's direction,
             // density, weight, whether it is a delta, and its shadow ray's
             // end: a point, or a direction for an emitter at infinity
             let mut other = [false; N];
@@ -529,13 +552,20 @@ impl<'a> LanePath<'a> {
                     let u = rngs[k].next_2d();
                     let (em, _, ux) = dist.sample_reuse(u.x);
                     match self.lights[em] {
-                        Some(light) => {
+                        LaneLight::Mesh(light) => {
                             let (_, _, p, n) =
                                 light.mesh.sample_point(&scene.params, Vec2::new(ux, u.y));
                             (y[k], yn[k], y_pdf[k], y_le[k]) =
                                 (p, n, light.pdf_area, light.radiance);
                         }
-                        None => {
+                        LaneLight::Constant { radiance, pick } => {
+                            let (d, pdf) = Constant::sample_direction_primal(Vec2::new(ux, u.y));
+                            other[k] = true;
+                            (o_d[k], o_pdf[k]) = (d, pdf * pick);
+                            o_w[k] = radiance * (1.0 / pdf) * (1.0 / pick);
+                            (o_far[k], o_end[k]) = (true, d);
+                        }
+                        LaneLight::Other => {
                             let at = V3::cst(lane3(p, k));
                             if let Some(es) = scene.sample_emitter::<f32>(store, at, u) {
                                 other[k] = true;
