@@ -2,11 +2,14 @@
 //! samples of a pixel is a lane of [`Lanes<N>`], and the shading of a
 //! bounce (the vertex's frame, the BSDF's value, density and sample, the
 //! MIS weights, Russian roulette, the throughput) is one instruction for
-//! all of them, 16 or 8 lanes wide where the processor has AVX-512 or
-//! AVX2 (docs/perf/lanes.md). Emission and light sampling of `area`
-//! emitters on meshes (a plain radiance) are in lanes too; traversal, the
-//! other emitters' sampling and texture look-ups (at an interaction that
-//! holds only the hit's uv) are the plugins' own code, called lane by lane.
+//! all of them: four lanes by default ([`lane_width`]), 8 or 16 where the
+//! processor has AVX2 or AVX-512 and they are asked for
+//! (docs/perf/lanes.md). Emission and light sampling of `area`
+//! emitters on meshes (a plain radiance) are in lanes too, and light
+//! samples of a `constant` environment of plain radiance are drawn here;
+//! traversal, the other emitters' sampling and texture look-ups (at an
+//! interaction that holds only the hit's uv) are the plugins' own code,
+//! called lane by lane.
 //!
 //! The estimator is [`PathIntegrator::trace`]'s, step for step (the same
 //! random numbers drawn in the same order), for the scenes whose plugins
