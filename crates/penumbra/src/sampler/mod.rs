@@ -224,9 +224,7 @@ impl SampleStream {
         dim: 0,
         pattern: Pattern::Independent { state: 0 },
     };
-}
 
-impl SampleStream {
     /// The next uniform number in [0, 1).
     #[inline(always)]
     pub fn next_1d(&mut self) -> f32 {
