@@ -134,8 +134,9 @@ pub(crate) trait LaneKernel {
 /// of lane values live, and AVX-512 gives it 32 vector registers instead
 /// of 16 (and mask registers for its selects), so fewer spill to the
 /// stack. cbox renders in 0.91 of the time on an AMD EPYC (Zen 4) and
-/// grad_rev_bsdf in 0.91; AVX2 and FMA alone (16 registers) buy nothing
-/// (docs/perf/lanes.md, "Evening").
+/// grad_rev_bsdf in 0.91; on an Intel Xeon, without them cbox takes 1.094
+/// of the time; AVX2 and FMA alone (16 registers) buy nothing
+/// (docs/perf/lanes.md, "Evening" and "Night").
 pub(crate) fn run_lanes<K: LaneKernel>(width: usize, kernel: &mut K) -> K::Out {
     #[cfg(target_arch = "x86_64")]
     {
