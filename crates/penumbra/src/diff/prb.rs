@@ -186,7 +186,7 @@ pub fn render_backward(
     };
     if d_image.len() != cw * ch * 3 {
         let n = d_image.len();
-        let got = if n % (cw * ch) == 0 {
+        let got = if n.is_multiple_of(cw * ch) {
             format!("{ch}×{cw}×{}", n / (cw * ch))
         } else {
             format!("{n} values")

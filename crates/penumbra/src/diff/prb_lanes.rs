@@ -44,7 +44,9 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
 use crate::image::film::AdjointImage;
-use crate::integrator::lanes::{lane3, run_lanes, LaneKernel, LanePath, PathLog};
+use crate::integrator::lanes::{
+    lane3, run_lanes, LaneKernel, LanePath, PathLog, SampleBlock, PACKET,
+};
 use crate::integrator::render::{SampleLayout, Tile};
 use crate::math::V3;
 use crate::params::{ParamId, ParamView};
@@ -176,63 +178,70 @@ impl<'a> LaneAdjoint<'a> {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
                 while first < layout.spp {
-                    let count = ((layout.spp - first) as usize).min(N);
-                    // lanes past `count` repeat the last sample, inactive
-                    let (pos, rays, mut rngs) =
-                        self.lanes.camera_lanes::<N>(layout, x, y, first, count);
+                    let count = ((layout.spp - first) as usize).min(PACKET);
+                    let mut group = self.lanes.camera_group(layout, x, y, first, count);
                     first += count as u32;
-                    let delta: [[f32; 3]; N] =
-                        each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
-                    // a sample without adjoint radiance is not traced
-                    let active = LaneMask::<N>::from_fn(|k| k < count && delta[k] != [0.0; 3]);
-                    if active.none() {
-                        continue;
-                    }
-                    log.vertices.clear();
-                    let (l, _) = self.lanes.trace(rays, active, &mut rngs, &mut log);
-                    // samples with a non-finite radiance are left out
-                    let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
-                    non_finite += (0..count)
-                        .filter(|&k| active.lane(k) && !keep.lane(k))
-                        .count();
-                    let delta = V3::new(
-                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][0] } else { 0.0 }),
-                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
-                        Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
-                    );
-                    log.sweep(delta, |vertex, k, hit, g| {
-                        match self.reflectance[hit.shape as usize] {
-                            None => {}
-                            Some(Reflectance::Uniform(_)) => {
-                                uniform[hit.shape as usize] += g.as_dvec3();
-                            }
-                            Some(Reflectance::Varying(texture)) => {
-                                // the look-up of the primal pass, on Vars
-                                // (a bitmap's texels without them)
-                                let mesh = self.lanes.mesh(hit.shape);
-                                let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
-                                if let Texture::Bitmap(bitmap) = texture {
-                                    if !self.store.is_recorded(bitmap.to_uv) {
-                                        // texels alone: their weights, no tape
-                                        bitmap.scatter_adjoint(self.store, uv, g, |i, d| {
-                                            sums.add(bitmap.data, i, d)
-                                        });
-                                        return;
-                                    }
-                                }
-                                let p = lane3(vertex.p, k);
-                                let si = surface_si::<Var>(
-                                    p,
-                                    vertex.n[k],
-                                    uv,
-                                    Vec3::Z,
-                                    hit.shape,
-                                    hit.prim,
-                                );
-                                self.scatter(texture, &si, g, sums);
-                            }
+                    for at in (0..count).step_by(N) {
+                        let SampleBlock {
+                            pos,
+                            rays,
+                            hits,
+                            mut rngs,
+                            active: in_group,
+                        } = group.block::<N>(at);
+                        let delta: [[f32; 3]; N] =
+                            each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
+                        // a sample without adjoint radiance is not shaded
+                        let active =
+                            LaneMask::<N>::from_fn(|k| in_group.lane(k) && delta[k] != [0.0; 3]);
+                        if active.none() {
+                            continue;
                         }
-                    });
+                        let hits = each_lane(|k| if active.lane(k) { hits[k] } else { None });
+                        log.vertices.clear();
+                        let (l, _) = self.lanes.trace(rays, hits, active, &mut rngs, &mut log);
+                        // samples with a non-finite radiance are left out
+                        let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
+                        non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
+                        let delta = V3::new(
+                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][0] } else { 0.0 }),
+                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
+                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
+                        );
+                        log.sweep(delta, |vertex, k, hit, g| {
+                            match self.reflectance[hit.shape as usize] {
+                                None => {}
+                                Some(Reflectance::Uniform(_)) => {
+                                    uniform[hit.shape as usize] += g.as_dvec3();
+                                }
+                                Some(Reflectance::Varying(texture)) => {
+                                    // the look-up of the primal pass, on Vars
+                                    // (a bitmap's texels without them)
+                                    let mesh = self.lanes.mesh(hit.shape);
+                                    let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
+                                    if let Texture::Bitmap(bitmap) = texture {
+                                        if !self.store.is_recorded(bitmap.to_uv) {
+                                            // texels alone: their weights, no tape
+                                            bitmap.scatter_adjoint(self.store, uv, g, |i, d| {
+                                                sums.add(bitmap.data, i, d)
+                                            });
+                                            return;
+                                        }
+                                    }
+                                    let p = lane3(vertex.p, k);
+                                    let si = surface_si::<Var>(
+                                        p,
+                                        vertex.n[k],
+                                        uv,
+                                        Vec3::Z,
+                                        hit.shape,
+                                        hit.prim,
+                                    );
+                                    self.scatter(texture, &si, g, sums);
+                                }
+                            }
+                        });
+                    }
                 }
             }
         }
@@ -437,7 +446,8 @@ mod tests {
                         let mut rngs = samples.clone().map(|s| s.2);
                         let mut log = Replay::<4>::default();
                         let all = LaneMask::<4>::from_fn(|_| true);
-                        let (l, _) = lanes.trace(rays, all, &mut rngs, &mut log);
+                        let hits = rays.map(|r| scene.intersect(&r));
+                        let (l, _) = lanes.trace(rays, hits, all, &mut rngs, &mut log);
                         let swept = log.sweep(V3::zero(), |_, _, _, _| {});
                         for k in 0..4 {
                             let (a, b) = (lane3(l, k), lane3(swept, k));

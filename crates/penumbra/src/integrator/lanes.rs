@@ -39,6 +39,61 @@ use crate::scene::Scene;
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
+/// How many of a pixel's samples have their camera rays traced together,
+/// as one packet ([`Accel::intersect_packet`]): one pixel's camera rays
+/// leave one point in nearly one direction, the most coherent rays there
+/// are, and sixteen of them fill an AVX-512 register. The samples are
+/// then shaded `N` at a time (docs/perf/traversal.md, "Camera rays in
+/// packets").
+pub(crate) const PACKET: usize = 16;
+
+/// Up to [`PACKET`] samples of a pixel ([`LanePath::camera_group`]): film
+/// positions in pixels, camera rays, their first hits, and the samples'
+/// streams of random numbers.
+pub(crate) struct CameraGroup {
+    pos: [Vec2; PACKET],
+    rays: [Ray; PACKET],
+    hits: [Option<Hit>; PACKET],
+    rngs: [SampleStream; PACKET],
+    count: usize,
+}
+
+/// `N` samples of a [`CameraGroup`] ([`CameraGroup::block`]).
+pub(crate) struct SampleBlock<const N: usize> {
+    pub pos: [Vec2; N],
+    pub rays: [Ray; N],
+    pub hits: [Option<Hit>; N],
+    pub rngs: [SampleStream; N],
+    /// The lanes that hold a sample of the group.
+    pub active: LaneMask<N>,
+}
+
+impl CameraGroup {
+    /// Samples `at..at + N` of the group in `N` lanes: lanes past the
+    /// group's end repeat its last sample's position and ray, without a
+    /// hit or a stream, and are inactive.
+    #[inline(always)]
+    pub(crate) fn block<const N: usize>(&mut self, at: usize) -> SampleBlock<N> {
+        const { assert!(PACKET.is_multiple_of(N)) };
+        let mut b = SampleBlock {
+            pos: [Vec2::ZERO; N],
+            rays: [Ray::new(Vec3::ZERO, Vec3::Z); N],
+            hits: [None; N],
+            rngs: [SampleStream::PLACEHOLDER; N],
+            active: LaneMask::from_fn(|k| at + k < self.count),
+        };
+        for k in 0..N {
+            let i = (at + k).min(self.count - 1);
+            (b.pos[k], b.rays[k]) = (self.pos[i], self.rays[i]);
+            if at + k < self.count {
+                b.hits[k] = self.hits[i];
+                b.rngs[k] = std::mem::replace(&mut self.rngs[i], SampleStream::PLACEHOLDER);
+            }
+        }
+        b
+    }
+}
+
 /// What the loop reads of a shape at each hit.
 struct LaneShape<'a> {
     mesh: &'a Mesh,
@@ -329,81 +384,93 @@ impl<'a> LanePath<'a> {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
                 while first < layout.spp {
-                    let count = ((layout.spp - first) as usize).min(N);
-                    // lanes past `count` repeat the last sample, inactive
-                    let (pos, rays, mut rngs) = self.camera_lanes::<N>(layout, x, y, first, count);
-                    let active = LaneMask::<N>::from_fn(|k| k < count);
-                    let (l, hit) = self.trace(rays, active, &mut rngs, &mut ());
-                    // samples with a non-finite value are left out
-                    let finite = l.x.finite() & l.y.finite() & l.z.finite();
-                    let keep = each_lane(|k| active.lane(k) && finite.lane(k));
-                    non_finite += count - keep.iter().filter(|&&k| k).count();
-                    let px = each_lane(|k| pos[k].x);
-                    let py = each_lane(|k| pos[k].y);
-                    let rgb = [l.x.0, l.y.0, l.z.0];
-                    if alpha {
-                        let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
-                        let [r, g, b] = rgb;
-                        block.put_lanes(filter, px, py, [r, g, b, a], keep);
-                    } else {
-                        block.put_lanes(filter, px, py, rgb, keep);
-                    }
+                    let count = ((layout.spp - first) as usize).min(PACKET);
+                    let mut group = self.camera_group(layout, x, y, first, count);
                     first += count as u32;
+                    for at in (0..count).step_by(N) {
+                        let SampleBlock {
+                            pos,
+                            rays,
+                            hits,
+                            mut rngs,
+                            active,
+                        } = group.block::<N>(at);
+                        let (l, hit) = self.trace(rays, hits, active, &mut rngs, &mut ());
+                        // samples with a non-finite value are left out
+                        let finite = l.x.finite() & l.y.finite() & l.z.finite();
+                        let keep = each_lane(|k| active.lane(k) && finite.lane(k));
+                        let in_block = (count - at).min(N);
+                        non_finite += in_block - keep.iter().filter(|&&k| k).count();
+                        let px = each_lane(|k| pos[k].x);
+                        let py = each_lane(|k| pos[k].y);
+                        let rgb = [l.x.0, l.y.0, l.z.0];
+                        if alpha {
+                            let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
+                            let [r, g, b] = rgb;
+                            block.put_lanes(filter, px, py, [r, g, b, a], keep);
+                        } else {
+                            block.put_lanes(filter, px, py, rgb, keep);
+                        }
+                    }
                 }
             }
         }
         non_finite
     }
 
-    /// Samples `first..first + count` of pixel `(x, y)` in `N` lanes (the
-    /// lanes past `count` repeat the last one): their film positions in
-    /// pixels, camera rays and streams of random numbers.
+    /// Samples `first..first + count` of pixel `(x, y)` (`count` at most
+    /// [`PACKET`]): their film positions in pixels, camera rays and
+    /// streams of random numbers, and the camera rays' hits, traced as one
+    /// packet.
     #[inline(always)]
-    pub(crate) fn camera_lanes<const N: usize>(
+    pub(crate) fn camera_group(
         &self,
         layout: &SampleLayout,
         x: i64,
         y: i64,
         first: u32,
         count: usize,
-    ) -> ([Vec2; N], [Ray; N], [SampleStream; N]) {
-        // filled lane by lane, not through `std::array::from_fn`, whose
+    ) -> CameraGroup {
+        debug_assert!((1..=PACKET).contains(&count));
+        // filled sample by sample, not through `std::array::from_fn`, whose
         // closures were left out of line, without the lanes' target
         // features; the pixel's key hashed once
         let key = layout.pixel_key(x, y);
-        let mut pos = [Vec2::ZERO; N];
-        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); N];
-        let mut rngs = [SampleStream::PLACEHOLDER; N];
-        for k in 0..N {
-            let (p, cs, rng) = layout.camera_sample_of(x, y, key, first + k.min(count - 1) as u32);
-            (pos[k], rays[k], rngs[k]) = (p, cs.ray::<f32>(&self.store).val(), rng);
+        let mut group = CameraGroup {
+            pos: [Vec2::ZERO; PACKET],
+            rays: [Ray::new(Vec3::ZERO, Vec3::Z); PACKET],
+            hits: [None; PACKET],
+            rngs: [SampleStream::PLACEHOLDER; PACKET],
+            count,
+        };
+        for k in 0..count {
+            let (p, cs, rng) = layout.camera_sample_of(x, y, key, first + k as u32);
+            (group.pos[k], group.rays[k], group.rngs[k]) =
+                (p, cs.ray::<f32>(&self.store).val(), rng);
         }
-        (pos, rays, rngs)
+        group.hits = intersect_camera_rays(self.scene, &group.rays, count);
+        group
     }
 
     /// [`PathIntegrator::trace`] from the camera rays `rays` in the lanes
-    /// of `active`, each lane drawing from its own stream: the radiance
-    /// per lane, and whether each camera ray reached a surface. `log`
-    /// hears of every vertex (see [`PathLog`]).
+    /// of `active`, whose first hits are `hits` (`None` in the other
+    /// lanes), each lane drawing from its own stream: the radiance per
+    /// lane, and whether each camera ray reached a surface. `log` hears of
+    /// every vertex (see [`PathLog`]).
     #[inline(always)]
     pub(crate) fn trace<const N: usize>(
         &self,
         mut rays: [Ray; N],
+        mut hits: [Option<Hit>; N],
         active: LaneMask<N>,
         rngs: &mut [SampleStream; N],
         log: &mut impl PathLog<N>,
     ) -> (Spectrum<Lanes<N>>, [bool; N]) {
+        debug_assert!((0..N).all(|k| active.lane(k) || hits[k].is_none()));
         let (scene, store, path) = (self.scene, &self.store, self.path);
         let (zero, one) = (Lanes::<N>::cst(0.0), Lanes::<N>::cst(1.0));
         let mut result = V3::<Lanes<N>>::zero();
         let mut throughput = V3::splat(one);
-        let mut hits: [Option<Hit>; N] = each_lane(|k| {
-            if active.lane(k) {
-                intersect(scene, &rays[k])
-            } else {
-                None
-            }
-        });
         let camera_hits = hits.map(|h| h.is_some());
         let mut alive = active;
         // the vertex each ray left and the density of its direction, for
@@ -729,6 +796,17 @@ pub(crate) fn lane_width() -> Result<usize> {
              has (up to {widest})"
         ))),
     }
+}
+
+/// The closest hits of the first `count` of a pixel's camera rays, traced
+/// as one packet, out of line: the traversal picks its own kernel.
+#[inline(never)]
+fn intersect_camera_rays(
+    scene: &Scene,
+    rays: &[Ray; PACKET],
+    count: usize,
+) -> [Option<Hit>; PACKET] {
+    scene.accel.intersect_packet(rays, u32::MAX >> (32 - count))
 }
 
 /// A ray's closest hit, out of line: the traversal picks its own kernel.

@@ -252,7 +252,7 @@ impl Pose {
             PoseLayout::Matrix if len != 16 => Err(format!(
                 "a transform pose needs a [4, 4] matrix (16 values), found {len}"
             )),
-            PoseLayout::Points | PoseLayout::Directions if len % 3 != 0 => Err(format!(
+            PoseLayout::Points | PoseLayout::Directions if !len.is_multiple_of(3) => Err(format!(
                 "a vertex pose needs [n, 3] values, found {len} (not a multiple of 3)"
             )),
             _ => Ok(()),

@@ -50,7 +50,10 @@ impl Orthogonal {
 }
 
 fn is_prime(x: u32) -> bool {
-    x >= 2 && (2..).take_while(|d| d * d <= x).all(|d| x % d != 0)
+    x >= 2
+        && (2..)
+            .take_while(|d| d * d <= x)
+            .all(|d| !x.is_multiple_of(d))
 }
 
 /// The array's strata per dimension: the smallest prime p ≥ 2 with

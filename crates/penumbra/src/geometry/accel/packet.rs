@@ -1,0 +1,313 @@
+//! Packet traversal: `N` rays through the 8-wide tree together, each
+//! operation one AVX-512 instruction across the rays (Wald et al. 2001,
+//! "Interactive Rendering with Coherent Ray Tracing"; Embree's packet
+//! kernels). A node's box is tested against all the rays that reached it
+//! at once, and a triangle likewise. It pays for rays that take the same
+//! way through the tree: the path tracer in lanes traces each pixel's
+//! camera rays as one packet (`integrator::lanes`, [`PACKET`] rays: one
+//! origin, nearly one direction). For bounce and shadow rays it was
+//! slower than one ray at a time (docs/perf/traversal.md, "Camera rays in
+//! packets").
+//!
+//! The arithmetic per ray is that of the single-ray kernel ([`TRay`]),
+//! operation for operation, so that every hit is the same bit for bit;
+//! only the order of the visits differs, which [`Closest::offer`] makes
+//! irrelevant.
+//!
+//! [`PACKET`]: crate::integrator::lanes::PACKET
+
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports))]
+
+use super::*;
+use crate::ad::lanes::widest_lanes;
+
+/// The rays of a packet as structure of arrays (see [`TRay`]): the near
+/// side of a box per axis is the max side where `neg`.
+struct PacketRays<const N: usize> {
+    o: [[f32; N]; 3],
+    d: [[f32; N]; 3],
+    inv: [[f32; N]; 3],
+    inv_far: [[f32; N]; 3],
+    neg: [[bool; N]; 3],
+    tmin: [f32; N],
+}
+
+impl<const N: usize> PacketRays<N> {
+    #[inline(always)]
+    fn new(rays: &[Ray; N]) -> PacketRays<N> {
+        let mut r = PacketRays {
+            o: [[0.0; N]; 3],
+            d: [[0.0; N]; 3],
+            inv: [[0.0; N]; 3],
+            inv_far: [[0.0; N]; 3],
+            neg: [[false; N]; 3],
+            tmin: [0.0; N],
+        };
+        for (i, ray) in rays.iter().enumerate() {
+            // as `TRay::new`
+            let d = ray.d + Vec3::ZERO;
+            let inv = d.recip();
+            let inv_far = inv * FAR_ROUND_UP;
+            for a in 0..3 {
+                r.o[a][i] = ray.o[a];
+                r.d[a][i] = d[a];
+                r.inv[a][i] = inv[a];
+                r.inv_far[a][i] = inv_far[a];
+                r.neg[a][i] = inv[a] < 0.0;
+            }
+            r.tmin[i] = ray.tmin;
+        }
+        r
+    }
+
+    /// Which of the rays in `active` overlap the box of child `k` of `n`
+    /// on `[tmin, tmax_far]` (bit i: ray i), and their entry distances:
+    /// [`TRay::hit_node`] per ray.
+    #[inline(always)]
+    fn hit_box(&self, n: &Node<8>, k: usize, tmax_far: &[f32; N], active: u32) -> (u32, [f32; N]) {
+        let mut t0 = self.tmin;
+        let mut t1 = *tmax_far;
+        for a in 0..3 {
+            let (lo, hi) = (n.b[0][a][k], n.b[1][a][k]);
+            for i in 0..N {
+                let (bn, bf) = if self.neg[a][i] { (hi, lo) } else { (lo, hi) };
+                let near = (bn - self.o[a][i]) * self.inv[a][i];
+                let far = (bf - self.o[a][i]) * self.inv_far[a][i];
+                // a NaN slab leaves the interval as it is
+                t0[i] = if near > t0[i] { near } else { t0[i] };
+                t1[i] = if far < t1[i] { far } else { t1[i] };
+            }
+        }
+        (bits::<N>(|i| t0[i] <= t1[i]) & active, t0)
+    }
+
+    /// Which of the rays in `active` hit triangle lane `j` of `p` on
+    /// `(tmin, tmax)`, with the distance and barycentrics of each:
+    /// [`TRay::hit_tris`] per ray.
+    #[inline(always)]
+    fn hit_tri(
+        &self,
+        p: &Tri4,
+        j: usize,
+        tmax: &[f32; N],
+        active: u32,
+    ) -> (u32, [f32; N], [f32; N], [f32; N]) {
+        let v0 = [p.v0[0][j], p.v0[1][j], p.v0[2][j]];
+        let e1 = [p.e1[0][j], p.e1[1][j], p.e1[2][j]];
+        let e2 = [p.e2[0][j], p.e2[1][j], p.e2[2][j]];
+        let ng = [p.ng[0][j], p.ng[1][j], p.ng[2][j]];
+        let (mut t, mut u, mut v) = ([0.0; N], [0.0; N], [0.0; N]);
+        let mut ok = [false; N];
+        for i in 0..N {
+            let d = [self.d[0][i], self.d[1][i], self.d[2][i]];
+            let c = [
+                v0[0] - self.o[0][i],
+                v0[1] - self.o[1][i],
+                v0[2] - self.o[2][i],
+            ];
+            let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            let den = dot(ng, d);
+            // the sign of `den` as ±1 (a NaN `den` fails `aden > 0` below)
+            let s = f32::from_bits(den.to_bits() & 0x8000_0000 | 1.0f32.to_bits());
+            let aden = den.abs();
+            let r = [
+                d[1] * c[2] - d[2] * c[1],
+                d[2] * c[0] - d[0] * c[2],
+                d[0] * c[1] - d[1] * c[0],
+            ];
+            let ui = dot(r, e2) * s;
+            let vi = dot(r, e1) * s;
+            let tn = dot(ng, c) * s;
+            ok[i] = aden > 0.0
+                && ui >= 0.0
+                && vi >= 0.0
+                && ui + vi <= aden
+                && tn > aden * self.tmin[i]
+                && tn < aden * tmax[i];
+            let inv = 1.0 / aden;
+            (t[i], u[i], v[i]) = (tn * inv, ui * inv, vi * inv);
+        }
+        (bits::<N>(|i| ok[i]) & active, t, u, v)
+    }
+}
+
+/// The lanes `i < N` for which `f(i)` holds, as bits. Sixteen lanes are
+/// one compare into a mask register and one move: LLVM otherwise
+/// assembles the bits one shift at a time, which was a quarter of the
+/// kernel's time.
+#[inline(always)]
+fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if N == 16 {
+        use std::arch::x86_64::*;
+        let mut v = [0i32; 16];
+        for (i, v) in v.iter_mut().enumerate() {
+            *v = if f(i) { -1 } else { 0 };
+        }
+        // SAFETY: the packet kernel runs only inside
+        // `intersect_packet_avx512`, which `Accel::intersect_packet`
+        // enters only where AVX-512 (F, DQ) is; `v` holds sixteen i32.
+        return unsafe { _mm512_movepi32_mask(_mm512_loadu_si512(v.as_ptr().cast())) } as u32;
+    }
+    let mut m = 0;
+    for i in 0..N {
+        m |= (f(i) as u32) << i;
+    }
+    m
+}
+
+impl Accel {
+    /// The closest hits of the rays `rays[i]` for each bit `i` of `active`
+    /// (`None` for the others): those of [`Accel::intersect`] ray by ray,
+    /// bit for bit. Traced as one packet on an 8-wide tree where the
+    /// processor has AVX-512, else one by one.
+    pub fn intersect_packet<const N: usize>(
+        &self,
+        rays: &[Ray; N],
+        active: u32,
+    ) -> [Option<Hit>; N] {
+        const { assert!(N <= 32) };
+        #[cfg(target_arch = "x86_64")]
+        if let Nodes::Eight(nodes) = &self.nodes {
+            if self.stack_size <= STACK && !nodes.is_empty() && widest_lanes() == 16 {
+                // SAFETY: `widest_lanes` is 16 only with AVX-512 (F, VL,
+                // DQ, BW), and 8-wide trees only with AVX2 and FMA's AVX.
+                return unsafe { self.intersect_packet_avx512(nodes, rays, active) };
+            }
+        }
+        let mut hits = [None; N];
+        for (i, h) in hits.iter_mut().enumerate() {
+            if active >> i & 1 != 0 {
+                *h = self.intersect(&rays[i]);
+            }
+        }
+        hits
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+    fn intersect_packet_avx512<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> [Option<Hit>; N] {
+        self.intersect_packet_with(nodes, rays, active)
+    }
+
+    /// [`Accel::intersect_with`] for a packet: a stack entry is a node and
+    /// the entry distances of the rays that reached it (NaN for the others).
+    #[inline(always)]
+    #[cfg(target_arch = "x86_64")]
+    fn intersect_packet_with<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> [Option<Hit>; N] {
+        let pr = PacketRays::new(rays);
+        let mut c: [Closest; N] = std::array::from_fn(|i| Closest::new(rays[i].tmax));
+        let mut tmax = [0.0; N];
+        let mut tmax_far = [0.0; N];
+        for i in 0..N {
+            (tmax[i], tmax_far[i]) = (c[i].tmax, c[i].tmax_far);
+        }
+        let mut buf = [const { MaybeUninit::<(u32, [f32; N])>::uninit() }; STACK];
+        let mut stack = Stack::new(&mut buf);
+        // NaN: a ray that did not enter the node (fails `t_enter <= tmax`)
+        let root: [f32; N] = std::array::from_fn(|i| {
+            if active >> i & 1 != 0 {
+                pr.tmin[i]
+            } else {
+                f32::NAN
+            }
+        });
+        stack.push((0, root));
+        while let Some((mut cur, t_enter)) = stack.pop() {
+            // the rays that entered the node and found nothing nearer since
+            let mut act = bits::<N>(|i| t_enter[i] <= tmax[i]);
+            if act == 0 {
+                continue;
+            }
+            // descend, nearest child first (by its first ray's entry),
+            // the others onto the stack
+            while cur & LEAF == 0 {
+                let n = node(nodes, cur);
+                let mut hits = [(0u32, 0u32, 0f32); 8];
+                let mut entries = [[0f32; N]; 8];
+                let mut count = 0;
+                for k in 0..8 {
+                    if n.child[k] == EMPTY {
+                        continue;
+                    }
+                    let (mask, t0) = pr.hit_box(n, k, &tmax_far, act);
+                    if mask == 0 {
+                        continue;
+                    }
+                    // insertion by decreasing nearest entry
+                    let e = (n.child[k], mask, t0[mask.trailing_zeros() as usize]);
+                    let mut q = count;
+                    while q > 0 && hits[q - 1].2 < e.2 {
+                        hits[q] = hits[q - 1];
+                        entries[q] = entries[q - 1];
+                        q -= 1;
+                    }
+                    hits[q] = e;
+                    for i in 0..N {
+                        entries[q][i] = if mask >> i & 1 != 0 { t0[i] } else { f32::NAN };
+                    }
+                    count += 1;
+                }
+                if count == 0 {
+                    cur = EMPTY;
+                    break;
+                }
+                for q in 0..count - 1 {
+                    stack.push((hits[q].0, entries[q]));
+                }
+                (cur, act) = (hits[count - 1].0, hits[count - 1].1);
+            }
+            if cur == EMPTY {
+                continue;
+            }
+            let mut pi = (cur & !LEAF) as usize;
+            loop {
+                let p = self.packet(pi);
+                for j in 0..4 {
+                    if p.shape[j] == u32::MAX || p.analytic >> j & 1 != 0 {
+                        continue;
+                    }
+                    let (mask, t, u, v) = pr.hit_tri(p, j, &tmax_far, act);
+                    let mut m = mask;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        c[i].offer(t[i], p, j, Vec2::new(u[i], v[i]));
+                        (tmax[i], tmax_far[i]) = (c[i].tmax, c[i].tmax_far);
+                    }
+                }
+                let mut m = p.analytic;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let mut a = act;
+                    while a != 0 {
+                        let i = a.trailing_zeros() as usize;
+                        a &= a - 1;
+                        let hit =
+                            self.analytic_hit(p.shape[j], p.prim[j], &rays[i], pr.tmin[i], tmax[i]);
+                        if let Some(h) = hit {
+                            c[i].offer_hit(h);
+                            (tmax[i], tmax_far[i]) = (c[i].tmax, c[i].tmax_far);
+                        }
+                    }
+                }
+                if !p.more {
+                    break;
+                }
+                pi += 1;
+            }
+        }
+        c.map(|c| c.best)
+    }
+}
