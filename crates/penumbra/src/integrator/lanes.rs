@@ -6,10 +6,12 @@
 //! processor has AVX2 or AVX-512 and they are asked for
 //! (docs/perf/lanes.md). Emission and light sampling of `area`
 //! emitters on meshes (a plain radiance) are in lanes too, and light
-//! samples of a `constant` environment of plain radiance are drawn here;
-//! traversal, the other emitters' sampling and texture look-ups (at an
-//! interaction that holds only the hit's uv) are the plugins' own code,
-//! called lane by lane.
+//! samples of a `constant` environment of plain radiance are drawn here.
+//! A pixel's camera rays, up to [`PACKET`] of them, are traced together
+//! as one packet before their samples are shaded `N` at a time; the
+//! bounce and shadow rays' traversal, the other emitters' sampling and
+//! texture look-ups (at an interaction that holds only the hit's uv) are
+//! the plugins' own code, called lane by lane.
 //!
 //! The estimator is [`PathIntegrator::trace`]'s, step for step (the same
 //! random numbers drawn in the same order), for the scenes whose plugins
