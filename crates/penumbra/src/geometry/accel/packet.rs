@@ -144,9 +144,9 @@ fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
         for (i, v) in v.iter_mut().enumerate() {
             *v = if f(i) { -1 } else { 0 };
         }
-        // SAFETY: the packet kernel runs only inside
-        // `intersect_packet_avx512`, which `Accel::intersect_packet`
-        // enters only where AVX-512 (F, DQ) is; `v` holds sixteen i32.
+        // SAFETY: `bits` runs only inside `intersect_packet_avx512`,
+        // which `Accel::intersect_packet` enters only where AVX-512 (F,
+        // DQ) is; `v` holds sixteen i32.
         return unsafe { _mm512_movepi32_mask(_mm512_loadu_si512(v.as_ptr().cast())) } as u32;
     }
     let mut m = 0;
@@ -170,8 +170,8 @@ impl Accel {
         #[cfg(target_arch = "x86_64")]
         if let Nodes::Eight(nodes) = &self.nodes {
             if self.stack_size <= STACK && !nodes.is_empty() && widest_lanes() == 16 {
-                // SAFETY: `widest_lanes` is 16 only with AVX-512 (F, VL,
-                // DQ, BW), and 8-wide trees only with AVX2 and FMA's AVX.
+                // SAFETY: `widest_lanes` is 16 only where the processor
+                // has AVX-512 (F, VL, DQ, BW), AVX2 and FMA.
                 return unsafe { self.intersect_packet_avx512(nodes, rays, active) };
             }
         }
@@ -184,22 +184,12 @@ impl Accel {
         hits
     }
 
+    /// [`Accel::intersect_with`] for a packet, compiled for AVX-512: a
+    /// stack entry is a node and the entry distances of the rays that
+    /// reached it (NaN for the others).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
     fn intersect_packet_avx512<const N: usize>(
-        &self,
-        nodes: &[Node<8>],
-        rays: &[Ray; N],
-        active: u32,
-    ) -> [Option<Hit>; N] {
-        self.intersect_packet_with(nodes, rays, active)
-    }
-
-    /// [`Accel::intersect_with`] for a packet: a stack entry is a node and
-    /// the entry distances of the rays that reached it (NaN for the others).
-    #[inline(always)]
-    #[cfg(target_arch = "x86_64")]
-    fn intersect_packet_with<const N: usize>(
         &self,
         nodes: &[Node<8>],
         rays: &[Ray; N],
