@@ -42,11 +42,11 @@ use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
 /// How many of a pixel's samples have their camera rays traced together,
-/// as one packet ([`Accel::intersect_packet`]): one pixel's camera rays
-/// leave one point in nearly one direction, the most coherent rays there
-/// are, and sixteen of them fill an AVX-512 register. The samples are
-/// then shaded `N` at a time (docs/perf/traversal.md, "Camera rays in
-/// packets").
+/// as one packet ([`crate::geometry::Accel::intersect_packet`]): one
+/// pixel's camera rays leave one point in nearly one direction, the most
+/// coherent rays there are, and sixteen of them fill an AVX-512 register.
+/// The samples are then shaded `N` at a time (docs/perf/traversal.md,
+/// "Camera rays in packets").
 pub(crate) const PACKET: usize = 16;
 
 /// Up to [`PACKET`] samples of a pixel ([`LanePath::camera_group`]): film
