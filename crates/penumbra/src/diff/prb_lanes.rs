@@ -44,9 +44,7 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
 use crate::image::film::AdjointImage;
-use crate::integrator::lanes::{
-    lane3, run_lanes, LaneKernel, LanePath, PathLog, SampleBlock, PACKET,
-};
+use crate::integrator::lanes::{lane3, run_lanes, LaneKernel, LanePath, PathLog};
 use crate::integrator::render::{SampleLayout, Tile};
 use crate::math::V3;
 use crate::params::{ParamId, ParamView};
@@ -178,28 +176,24 @@ impl<'a> LaneAdjoint<'a> {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
                 while first < layout.spp {
-                    let count = ((layout.spp - first) as usize).min(PACKET);
-                    let mut group = self.lanes.camera_group(layout, x, y, first, count);
-                    first += count as u32;
-                    for at in (0..count).step_by(N) {
-                        let SampleBlock {
-                            pos,
-                            rays,
-                            hits,
-                            mut rngs,
-                            active: in_group,
-                        } = group.block::<N>(at);
+                    let mut group = self.lanes.camera_group(layout, x, y, first);
+                    first += group.len() as u32;
+                    for at in (0..group.len()).step_by(N) {
+                        let mut block = group.block::<N>(at);
                         let delta: [[f32; 3]; N] =
-                            each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
+                            each_lane(|k| adjoint.gather(filter, block.pos[k].x, block.pos[k].y));
                         // a sample without adjoint radiance is not shaded
-                        let active =
-                            LaneMask::<N>::from_fn(|k| in_group.lane(k) && delta[k] != [0.0; 3]);
+                        let active = LaneMask::<N>::from_fn(|k| {
+                            block.active.lane(k) && delta[k] != [0.0; 3]
+                        });
                         if active.none() {
                             continue;
                         }
-                        let hits = each_lane(|k| if active.lane(k) { hits[k] } else { None });
+                        let hits = each_lane(|k| if active.lane(k) { block.hits[k] } else { None });
                         log.vertices.clear();
-                        let (l, _) = self.lanes.trace(rays, hits, active, &mut rngs, &mut log);
+                        let (l, _) =
+                            self.lanes
+                                .trace(block.rays, hits, active, &mut block.rngs, &mut log);
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();

@@ -47,7 +47,7 @@ use glam::{Vec2, Vec3};
 /// coherent rays there are, and sixteen of them fill an AVX-512 register.
 /// The samples are then shaded `N` at a time (docs/perf/traversal.md,
 /// "Camera rays in packets").
-pub(crate) const PACKET: usize = 16;
+const PACKET: usize = 16;
 
 /// Up to [`PACKET`] samples of a pixel ([`LanePath::camera_group`]): film
 /// positions in pixels, camera rays, their first hits, and the samples'
@@ -71,6 +71,12 @@ pub(crate) struct SampleBlock<const N: usize> {
 }
 
 impl CameraGroup {
+    /// The number of samples in the group.
+    #[inline(always)]
+    pub(crate) fn len(&self) -> usize {
+        self.count
+    }
+
     /// Samples `at..at + N` of the group in `N` lanes: lanes past the
     /// group's end repeat its last sample's position and ray, without a
     /// hit or a stream, and are inactive.
@@ -386,10 +392,9 @@ impl<'a> LanePath<'a> {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
                 while first < layout.spp {
-                    let count = ((layout.spp - first) as usize).min(PACKET);
-                    let mut group = self.camera_group(layout, x, y, first, count);
-                    first += count as u32;
-                    for at in (0..count).step_by(N) {
+                    let mut group = self.camera_group(layout, x, y, first);
+                    first += group.len() as u32;
+                    for at in (0..group.len()).step_by(N) {
                         let SampleBlock {
                             pos,
                             rays,
@@ -401,7 +406,7 @@ impl<'a> LanePath<'a> {
                         // samples with a non-finite value are left out
                         let finite = l.x.finite() & l.y.finite() & l.z.finite();
                         let keep = each_lane(|k| active.lane(k) && finite.lane(k));
-                        let in_block = (count - at).min(N);
+                        let in_block = (group.len() - at).min(N);
                         non_finite += in_block - keep.iter().filter(|&&k| k).count();
                         let px = each_lane(|k| pos[k].x);
                         let py = each_lane(|k| pos[k].y);
@@ -420,10 +425,10 @@ impl<'a> LanePath<'a> {
         non_finite
     }
 
-    /// Samples `first..first + count` of pixel `(x, y)` (`count` at most
-    /// [`PACKET`]): their film positions in pixels, camera rays and
-    /// streams of random numbers, and the camera rays' hits, traced as one
-    /// packet.
+    /// The next [`PACKET`] samples of pixel `(x, y)` from sample `first`
+    /// on (fewer at the pixel's last): their film positions in pixels,
+    /// camera rays and streams of random numbers, and the camera rays'
+    /// hits, traced as one packet.
     #[inline(always)]
     pub(crate) fn camera_group(
         &self,
@@ -431,9 +436,9 @@ impl<'a> LanePath<'a> {
         x: i64,
         y: i64,
         first: u32,
-        count: usize,
     ) -> CameraGroup {
-        debug_assert!((1..=PACKET).contains(&count));
+        debug_assert!(first < layout.spp);
+        let count = ((layout.spp - first) as usize).min(PACKET);
         // filled sample by sample, not through `std::array::from_fn`, whose
         // closures were left out of line, without the lanes' target
         // features; the pixel's key hashed once

@@ -4,7 +4,7 @@
 //! kernels). A node's box is tested against all the rays that reached it
 //! at once, and a triangle likewise. It pays for rays that take the same
 //! way through the tree: the path tracer in lanes traces each pixel's
-//! camera rays as one packet (`integrator::lanes`, [`PACKET`] rays: one
+//! camera rays as one packet (`integrator::lanes`, up to sixteen rays: one
 //! origin, nearly one direction). For bounce and shadow rays it was
 //! slower than one ray at a time (docs/perf/traversal.md, "Camera rays in
 //! packets").
@@ -13,8 +13,6 @@
 //! operation for operation, so that every hit is the same bit for bit;
 //! only the order of the visits differs, which [`Closest::offer`] makes
 //! irrelevant.
-//!
-//! [`PACKET`]: crate::integrator::lanes::PACKET
 
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports))]
 
