@@ -406,8 +406,7 @@ impl<'a> LanePath<'a> {
                         // samples with a non-finite value are left out
                         let finite = l.x.finite() & l.y.finite() & l.z.finite();
                         let keep = each_lane(|k| active.lane(k) && finite.lane(k));
-                        let in_block = (group.len() - at).min(N);
-                        non_finite += in_block - keep.iter().filter(|&&k| k).count();
+                        non_finite += (0..N).filter(|&k| active.lane(k) && !keep[k]).count();
                         let px = each_lane(|k| pos[k].x);
                         let py = each_lane(|k| pos[k].y);
                         let rgb = [l.x.0, l.y.0, l.z.0];
