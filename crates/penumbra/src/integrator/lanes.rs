@@ -44,7 +44,8 @@ use glam::{Vec2, Vec3};
 /// How many of a pixel's samples have their camera rays traced together,
 /// as one packet ([`crate::geometry::Accel::intersect_packet`]): one
 /// pixel's camera rays leave one point in nearly one direction, the most
-/// coherent rays there are, and sixteen of them fill an AVX-512 register.
+/// coherent rays there are, and sixteen of them fill an AVX-512 register
+/// (or two AVX2 ones).
 /// The samples are then shaded `N` at a time (docs/perf/traversal.md,
 /// "Camera rays in packets").
 const PACKET: usize = 16;

@@ -1,5 +1,6 @@
 //! Packet traversal: `N` rays through the 8-wide tree together, each
-//! operation one AVX-512 instruction across the rays (Wald et al. 2001,
+//! operation one instruction across the rays, sixteen of them in an
+//! AVX-512 register or eight in an AVX2 one (Wald et al. 2001,
 //! "Interactive Rendering with Coherent Ray Tracing"; Embree's packet
 //! kernels). A node's box is tested against all the rays that reached it
 //! at once, and a triangle likewise. It pays for rays that take the same
@@ -62,7 +63,13 @@ impl<const N: usize> PacketRays<N> {
     /// on `[tmin, tmax_far]` (bit i: ray i), and their entry distances:
     /// [`TRay::hit_node`] per ray.
     #[inline(always)]
-    fn hit_box(&self, n: &Node<8>, k: usize, tmax_far: &[f32; N], active: u32) -> (u32, [f32; N]) {
+    fn hit_box<B: RayBits>(
+        &self,
+        n: &Node<8>,
+        k: usize,
+        tmax_far: &[f32; N],
+        active: u32,
+    ) -> (u32, [f32; N]) {
         let mut t0 = self.tmin;
         let mut t1 = *tmax_far;
         for a in 0..3 {
@@ -76,14 +83,14 @@ impl<const N: usize> PacketRays<N> {
                 t1[i] = if far < t1[i] { far } else { t1[i] };
             }
         }
-        (bits::<N>(|i| t0[i] <= t1[i]) & active, t0)
+        (B::bits::<N>(|i| t0[i] <= t1[i]) & active, t0)
     }
 
     /// Which of the rays in `active` hit triangle lane `j` of `p` on
     /// `(tmin, tmax)`, with the distance and barycentrics of each:
     /// [`TRay::hit_tris`] per ray.
     #[inline(always)]
-    fn hit_tri(
+    fn hit_tri<B: RayBits>(
         &self,
         p: &Tri4,
         j: usize,
@@ -125,28 +132,22 @@ impl<const N: usize> PacketRays<N> {
             let inv = 1.0 / aden;
             (t[i], u[i], v[i]) = (tn * inv, ui * inv, vi * inv);
         }
-        (bits::<N>(|i| ok[i]) & active, t, u, v)
+        (B::bits::<N>(|i| ok[i]) & active, t, u, v)
     }
 }
 
-/// The lanes `i < N` for which `f(i)` holds, as bits. Sixteen lanes are
-/// one compare into a mask register and one move: LLVM otherwise
+/// How a kernel turns a condition per ray into bits (bit i: ray i), by
+/// the instructions of the processor it is compiled for: LLVM otherwise
 /// assembles the bits one shift at a time, which was a quarter of the
-/// kernel's time.
+/// AVX-512 kernel's time (docs/perf/traversal.md).
+trait RayBits {
+    /// The rays `i < N` for which `f(i)` holds.
+    fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32;
+}
+
+/// The condition of each ray as a bit, one at a time.
 #[inline(always)]
-fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    if N == 16 {
-        use std::arch::x86_64::*;
-        let mut v = [0i32; 16];
-        for (i, v) in v.iter_mut().enumerate() {
-            *v = if f(i) { -1 } else { 0 };
-        }
-        // SAFETY: `bits` runs only inside `intersect_packet_avx512`,
-        // which `Accel::intersect_packet` enters only where AVX-512 (F,
-        // DQ) is; `v` holds sixteen i32.
-        return unsafe { _mm512_movepi32_mask(_mm512_loadu_si512(v.as_ptr().cast())) } as u32;
-    }
+fn bits_by_shifts<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
     let mut m = 0;
     for i in 0..N {
         m |= (f(i) as u32) << i;
@@ -154,11 +155,66 @@ fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
     m
 }
 
+/// Sixteen rays: one compare into a mask register and one move.
+#[cfg(target_arch = "x86_64")]
+struct Avx512Bits;
+
+#[cfg(target_arch = "x86_64")]
+impl RayBits for Avx512Bits {
+    #[inline(always)]
+    fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
+        use std::arch::x86_64::*;
+        if N != 16 {
+            return bits_by_shifts::<N>(f);
+        }
+        let mut v = [0i32; 16];
+        for (i, v) in v.iter_mut().enumerate() {
+            *v = if f(i) { -1 } else { 0 };
+        }
+        // SAFETY: `Avx512Bits` runs only inside `intersect_packet_avx512`,
+        // which `Accel::intersect_packet` enters only where AVX-512 (F,
+        // DQ) is; `v` holds sixteen i32.
+        unsafe { _mm512_movepi32_mask(_mm512_loadu_si512(v.as_ptr().cast())) as u32 }
+    }
+}
+
+/// Eight rays at a time: the sign bits of eight lanes in one move.
+#[cfg(target_arch = "x86_64")]
+struct Avx2Bits;
+
+#[cfg(target_arch = "x86_64")]
+impl RayBits for Avx2Bits {
+    #[inline(always)]
+    fn bits<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
+        use std::arch::x86_64::*;
+        if !N.is_multiple_of(8) {
+            return bits_by_shifts::<N>(f);
+        }
+        let mut v = [0i32; N];
+        for (i, v) in v.iter_mut().enumerate() {
+            *v = if f(i) { -1 } else { 0 };
+        }
+        let mut m = 0;
+        for (h, eight) in v.chunks_exact(8).enumerate() {
+            // SAFETY: `Avx2Bits` runs only inside `intersect_packet_avx2`,
+            // which `Accel::intersect_packet` enters only where AVX2 is;
+            // `eight` holds eight i32.
+            let half = unsafe {
+                _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_loadu_si256(
+                    eight.as_ptr().cast(),
+                )))
+            };
+            m |= (half as u32) << (8 * h);
+        }
+        m
+    }
+}
+
 impl Accel {
     /// The closest hits of the rays `rays[i]` for each bit `i` of `active`
     /// (`None` for the others): those of [`Accel::intersect`] ray by ray,
     /// bit for bit. Traced as one packet on an 8-wide tree where the
-    /// processor has AVX-512, else one by one.
+    /// processor has AVX-512 or AVX2, else one by one.
     pub fn intersect_packet<const N: usize>(
         &self,
         rays: &[Ray; N],
@@ -167,10 +223,15 @@ impl Accel {
         const { assert!(N <= 32) };
         #[cfg(target_arch = "x86_64")]
         if let Nodes::Eight(nodes) = &self.nodes {
-            if self.stack_size <= STACK && !nodes.is_empty() && widest_lanes() == 16 {
-                // SAFETY: `widest_lanes` is 16 only where the processor
-                // has AVX-512 (F, VL, DQ, BW), AVX2 and FMA.
-                return unsafe { self.intersect_packet_avx512(nodes, rays, active) };
+            if self.stack_size <= STACK && !nodes.is_empty() {
+                match widest_lanes() {
+                    // SAFETY: `widest_lanes` is 16 only where the
+                    // processor has AVX-512 (F, VL, DQ, BW), AVX2 and FMA,
+                    // and 8 only where it has AVX2 and FMA.
+                    16 => return unsafe { self.intersect_packet_avx512(nodes, rays, active) },
+                    8 => return unsafe { self.intersect_packet_avx2(nodes, rays, active) },
+                    _ => {}
+                }
             }
         }
         let mut hits = [None; N];
@@ -182,12 +243,38 @@ impl Accel {
         hits
     }
 
-    /// [`Accel::intersect_with`] for a packet, compiled for AVX-512: a
-    /// stack entry is a node and the entry distances of the rays that
-    /// reached it (NaN for the others).
+    /// [`Accel::walk_packet`] compiled for AVX-512.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
     fn intersect_packet_avx512<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> [Option<Hit>; N] {
+        self.walk_packet::<N, Avx512Bits>(nodes, rays, active)
+    }
+
+    /// [`Accel::walk_packet`] compiled for AVX2: sixteen rays are two
+    /// registers per operation.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn intersect_packet_avx2<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> [Option<Hit>; N] {
+        self.walk_packet::<N, Avx2Bits>(nodes, rays, active)
+    }
+
+    /// [`Accel::intersect_with`] for a packet: a stack entry is a node and
+    /// the entry distances of the rays that reached it (NaN for the
+    /// others). Inlined into the entry points above, which carry the
+    /// target features its operations are compiled with.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn walk_packet<const N: usize, B: RayBits>(
         &self,
         nodes: &[Node<8>],
         rays: &[Ray; N],
@@ -213,7 +300,7 @@ impl Accel {
         stack.push((0, root));
         while let Some((mut cur, t_enter)) = stack.pop() {
             // the rays that entered the node and found nothing nearer since
-            let mut act = bits::<N>(|i| t_enter[i] <= tmax[i]);
+            let mut act = B::bits::<N>(|i| t_enter[i] <= tmax[i]);
             if act == 0 {
                 continue;
             }
@@ -228,7 +315,7 @@ impl Accel {
                     if n.child[k] == EMPTY {
                         continue;
                     }
-                    let (mask, t0) = pr.hit_box(n, k, &tmax_far, act);
+                    let (mask, t0) = pr.hit_box::<B>(n, k, &tmax_far, act);
                     if mask == 0 {
                         continue;
                     }
@@ -265,7 +352,7 @@ impl Accel {
                     if p.shape[j] == u32::MAX || p.analytic >> j & 1 != 0 {
                         continue;
                     }
-                    let (mask, t, u, v) = pr.hit_tri(p, j, &tmax_far, act);
+                    let (mask, t, u, v) = pr.hit_tri::<B>(p, j, &tmax_far, act);
                     let mut m = mask;
                     while m != 0 {
                         let i = m.trailing_zeros() as usize;
