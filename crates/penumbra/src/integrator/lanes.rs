@@ -34,7 +34,7 @@ use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
 use crate::image::ImageBlock;
-use crate::math::{Frame, Spectrum, V2, V3};
+use crate::math::{warp, Frame, Spectrum, V2, V3};
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::Scene;
@@ -500,19 +500,36 @@ impl<'a> LanePath<'a> {
             if let (Some(env), true) = (scene.environment, shown) {
                 let escaped = LaneMask::<N>::from_fn(|k| alive.lane(k) && hits[k].is_none());
                 if escaped.any() {
-                    let emitter = &scene.emitters[env as usize];
-                    let mut w = Lanes::<N>::splat(0.0);
-                    let le = lanes3(|k| {
-                        if !escaped.lane(k) {
-                            return Vec3::ZERO;
+                    let (le, w) = match self.lights[env as usize] {
+                        // a constant environment in lanes: its radiance, and
+                        // the density of its light samples, the same in
+                        // every direction (`Scene::pdf_emitter_direction`)
+                        LaneLight::Constant { radiance, pick } => {
+                            let le = V3::select(escaped, V3::cst(radiance), V3::zero());
+                            let w = if depth == 0 {
+                                one
+                            } else {
+                                let pdf_em = Lanes::splat(warp::UNIFORM_SPHERE_PDF * pick);
+                                mis_weight(prev_pdf, pdf_em)
+                            };
+                            (le, Lanes::select(escaped, w, zero))
                         }
-                        let d = rays[k].d;
-                        w.0[k] = mis(
-                            k,
-                            scene.pdf_emitter_direction(env, lane3(prev_p, k), d, d, d),
-                        );
-                        emitter.eval_environment::<f32>(store, V3::cst(d)).val()
-                    });
+                        _ => {
+                            let emitter = &scene.emitters[env as usize];
+                            let mut w = Lanes::<N>::splat(0.0);
+                            let le = lanes3(|k| {
+                                if !escaped.lane(k) {
+                                    return Vec3::ZERO;
+                                }
+                                let d = rays[k].d;
+                                let at = lane3(prev_p, k);
+                                let pdf_em = scene.pdf_emitter_direction(env, at, d, d, d);
+                                w.0[k] = mis(k, pdf_em);
+                                emitter.eval_environment::<f32>(store, V3::cst(d)).val()
+                            });
+                            (le, w)
+                        }
+                    };
                     result += throughput.mul_elem(le) * w;
                     log.emitted(depth, || le * w);
                 }
