@@ -1857,18 +1857,31 @@ mod tests {
                 } else {
                     u32::MAX >> (32 - N)
                 };
-                let got = accel.intersect_packet(&rays, active);
+                // the kernel `intersect_packet` picks, and the AVX2 one
+                // also where the processor would pick AVX-512's
+                let mut kernels = vec![("dispatched", accel.intersect_packet(&rays, active))];
+                #[cfg(target_arch = "x86_64")]
+                if let Nodes::Eight(nodes) = &accel.nodes {
+                    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+                    if avx2 && accel.stack_size <= STACK && !nodes.is_empty() {
+                        // SAFETY: the processor has AVX2 and FMA.
+                        let got = unsafe { accel.intersect_packet_avx2(nodes, &rays, active) };
+                        kernels.push(("avx2", got));
+                    }
+                }
                 for k in 0..N {
                     let want = (active >> k & 1 != 0)
                         .then(|| accel.intersect(&rays[k]))
                         .flatten();
                     let key = |h: Option<Hit>| h.map(|h| (h.t, h.shape, h.prim, h.uv));
-                    assert_eq!(
-                        key(got[k]),
-                        key(want),
-                        "packet {i}, lane {k}: {:?}",
-                        rays[k]
-                    );
+                    for (kernel, got) in &kernels {
+                        assert_eq!(
+                            key(got[k]),
+                            key(want),
+                            "{kernel}, packet {i}, lane {k}: {:?}",
+                            rays[k]
+                        );
+                    }
                     hits += want.is_some() as usize;
                 }
             }

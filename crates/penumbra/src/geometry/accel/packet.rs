@@ -259,7 +259,7 @@ impl Accel {
     /// registers per operation.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn intersect_packet_avx2<const N: usize>(
+    pub(super) fn intersect_packet_avx2<const N: usize>(
         &self,
         nodes: &[Node<8>],
         rays: &[Ray; N],
