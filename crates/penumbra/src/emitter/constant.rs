@@ -30,12 +30,16 @@ impl Constant {
         })
     }
 
+    /// The density per solid angle of its directions, the same in every
+    /// direction: uniform on the sphere.
+    pub(crate) const DIRECTION_PDF: f32 = warp::UNIFORM_SPHERE_PDF;
+
     /// The direction of the sample for `u` and its density per solid
-    /// angle: uniform on the sphere. (The path tracer in lanes samples a
-    /// constant of plain radiance with it, without an emitter sample.)
+    /// angle. (The path tracer in lanes samples a constant of plain
+    /// radiance with it, without an emitter sample.)
     #[inline(always)]
     pub(crate) fn sample_direction_primal(u: Vec2) -> (Vec3, f32) {
-        (warp::square_to_uniform_sphere(u), warp::UNIFORM_SPHERE_PDF)
+        (warp::square_to_uniform_sphere(u), Constant::DIRECTION_PDF)
     }
 }
 
@@ -70,7 +74,7 @@ impl EmitterT for Constant {
         _: Vec3,
         _: Vec3,
     ) -> f32 {
-        warp::UNIFORM_SPHERE_PDF
+        Constant::DIRECTION_PDF
     }
     fn eval_surface<R: ScalarReal>(&self, _: &ParamView, _: &SurfaceInteraction<R>) -> Spectrum<R> {
         V3::zero()

@@ -34,7 +34,7 @@ use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
 use crate::image::ImageBlock;
-use crate::math::{warp, Frame, Spectrum, V2, V3};
+use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::Scene;
@@ -509,7 +509,7 @@ impl<'a> LanePath<'a> {
                             let w = if depth == 0 {
                                 one
                             } else {
-                                let pdf_em = Lanes::splat(warp::UNIFORM_SPHERE_PDF * pick);
+                                let pdf_em = Lanes::splat(Constant::DIRECTION_PDF * pick);
                                 mis_weight(prev_pdf, pdf_em)
                             };
                             (le, Lanes::select(escaped, w, zero))
