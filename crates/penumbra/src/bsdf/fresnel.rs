@@ -2,7 +2,7 @@
 //! diffuse Fresnel reflectance, and the named indices of refraction that
 //! Mitsuba 3 accepts for `int_ior` / `ext_ior`.
 
-use crate::ad::ScalarReal;
+use crate::ad::{Float, Real, ScalarReal};
 use crate::math::{Spectrum, V3};
 use glam::Vec3;
 
@@ -40,11 +40,30 @@ pub fn fresnel_dielectric<R: ScalarReal>(cos_theta_i: R, eta: R) -> (R, R, R, R)
     (r, cos_t_signed, eta_it, eta_ti)
 }
 
+/// [`fresnel_dielectric`]'s values, primal, for one path or for lanes:
+/// the same formulas with selects for its branches (the path tracer in
+/// lanes, `bsdf/lanes.rs`).
+#[inline(always)]
+pub(crate) fn fresnel_dielectric_primal<F: Float>(cos_theta_i: F, eta: F) -> (F, F, F, F) {
+    let outside = cos_theta_i.ge(0.0);
+    let inv = eta.recip();
+    let (eta_it, eta_ti) = (F::select(outside, eta, inv), F::select(outside, inv, eta));
+    let cos_t2 = -(-(cos_theta_i * cos_theta_i) + 1.0) * (eta_ti * eta_ti) + 1.0;
+    let cos_i = cos_theta_i.abs();
+    let cos_t = cos_t2.safe_sqrt();
+    let a_s = (cos_i - eta_it * cos_t) / (cos_i + eta_it * cos_t);
+    let a_p = (cos_t - eta_it * cos_i) / (cos_t + eta_it * cos_i);
+    let r = (a_s * a_s + a_p * a_p) * 0.5;
+    let r = F::select(cos_i.equals(0.0), F::cst(1.0), r);
+    let r = F::select(eta.equals(1.0), F::cst(0.0), r);
+    (r, F::select(outside, -cos_t, cos_t), eta_it, eta_ti)
+}
+
 /// Unpolarised Fresnel reflectance of a conductor with complex index of
 /// refraction `eta + i k` (relative to the outside medium), for one colour
 /// channel; exact formula (e.g. pbrt-v3 §8.2.1, `FrConductor`).
 #[inline]
-pub fn fresnel_conductor_1<R: ScalarReal>(cos_theta_i: R, eta: R, k: R) -> R {
+pub fn fresnel_conductor_1<R: Real>(cos_theta_i: R, eta: R, k: R) -> R {
     let c2 = cos_theta_i * cos_theta_i;
     let s2 = -c2 + 1.0;
     let s4 = s2 * s2;
@@ -62,11 +81,7 @@ pub fn fresnel_conductor_1<R: ScalarReal>(cos_theta_i: R, eta: R, k: R) -> R {
 
 /// [`fresnel_conductor_1`] for each RGB channel.
 #[inline]
-pub fn fresnel_conductor<R: ScalarReal>(
-    cos_theta_i: R,
-    eta: Spectrum<R>,
-    k: Spectrum<R>,
-) -> Spectrum<R> {
+pub fn fresnel_conductor<R: Real>(cos_theta_i: R, eta: Spectrum<R>, k: Spectrum<R>) -> Spectrum<R> {
     V3::new(
         fresnel_conductor_1(cos_theta_i, eta.x, k.x),
         fresnel_conductor_1(cos_theta_i, eta.y, k.y),
@@ -93,13 +108,13 @@ pub fn fresnel_diffuse_reflectance<R: ScalarReal>(eta: R) -> R {
 /// `eta_ti` from [`fresnel_dielectric`] (evaluated at `dot(wi, m)`).
 /// Generic so that delta refraction moves with an attached `wi`.
 #[inline]
-pub fn refract<R: ScalarReal>(wi: V3<R>, m: V3<R>, cos_theta_t: R, eta_ti: R) -> V3<R> {
+pub fn refract<R: Real>(wi: V3<R>, m: V3<R>, cos_theta_t: R, eta_ti: R) -> V3<R> {
     m * (wi.dot(m) * eta_ti + cos_theta_t) - wi * eta_ti
 }
 
 /// Mirror reflection of `wi` about `m`.
 #[inline]
-pub fn reflect<R: ScalarReal>(wi: V3<R>, m: V3<R>) -> V3<R> {
+pub fn reflect<R: Real>(wi: V3<R>, m: V3<R>) -> V3<R> {
     m * (wi.dot(m) * 2.0) - wi
 }
 

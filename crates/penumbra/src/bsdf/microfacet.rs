@@ -11,10 +11,10 @@
 //! alpha_v)` along the shading frame's tangents, Walter et al.'s rational
 //! fit for the Beckmann `G1`, and `G = G1(wi) G1(wo)`.
 
-use crate::ad::ScalarReal;
+use crate::ad::{Float, ScalarReal};
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
-use crate::math::{warp, V3};
+use crate::math::{warp, V2, V3};
 use crate::params::{Domain, ParamView};
 use crate::scene::description::{LoadContext, Node, Value};
 use crate::texture::{Channels, Texture, TextureT};
@@ -204,6 +204,69 @@ pub(crate) fn sample_ggx_visible(wi: Vec3, au: f32, av: f32, u: Vec2) -> Vec3 {
     let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * (r * sin_phi);
     let nh = t1 * p1 + t2 * p2 + vh * (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
     Vec3::new(au * nh.x, av * nh.y, nh.z.max(0.0)).normalize()
+}
+
+/// Isotropic GGX for one path (`f32`) or for lanes (`Lanes<N>`), primal:
+/// what the path tracer in lanes (`bsdf/lanes.rs`) evaluates, with the
+/// conventions of [`MicrofacetDistribution`] (the same density, masking,
+/// flush of negligible densities and visible-normal sampling), written
+/// with masks and selects instead of branches.
+pub(crate) mod ggx {
+    use super::*;
+
+    /// `D(m)` of roughness `alpha`; zero below the surface and where
+    /// `D(m) cos θm` is negligible (as [`MicrofacetDistribution::eval`]).
+    #[inline(always)]
+    pub(crate) fn eval<F: Float>(alpha: F, m: V3<F>) -> F {
+        let a2 = alpha * alpha;
+        let cos2 = m.z * m.z;
+        let d = (m.x * m.x + m.y * m.y) / a2 + cos2;
+        let r = (a2 * d * d * std::f32::consts::PI).recip();
+        F::select(m.z.gt(0.0) & (r * m.z).gt(1e-20), r, F::cst(0.0))
+    }
+
+    /// Smith's `G1(v, m)`: zero where `v` sees the back of the microfacet.
+    #[inline(always)]
+    pub(crate) fn smith_g1<F: Float>(alpha: F, v: V3<F>, m: V3<F>) -> F {
+        let tan2 = (v.x * v.x + v.y * v.y) * (alpha * alpha) / (v.z * v.z);
+        let g = ((tan2 + 1.0).sqrt() + 1.0).recip() * 2.0;
+        F::select((v.dot(m) * v.z).gt(0.0), g, F::cst(0.0))
+    }
+
+    /// The density of [`sample_visible`] returning `m` for `wi` (`wi.z >
+    /// 0`), per solid angle of microfacet normals: `D(m) G1(wi, m) |wi·m| /
+    /// cos θi`.
+    #[inline(always)]
+    pub(crate) fn pdf_visible<F: Float>(alpha: F, wi: V3<F>, m: V3<F>) -> F {
+        let p = eval(alpha, m) * smith_g1(alpha, wi, m) * wi.dot(m).abs() / wi.z;
+        F::select(wi.z.gt(0.0), p, F::cst(0.0))
+    }
+
+    /// A microfacet normal visible from `wi` (`wi.z > 0`), by Heitz 2018
+    /// ("Sampling the GGX Distribution of Visible Normals", JCGT 7(4)), as
+    /// [`super::sample_ggx_visible`]; its uniform disk sample is the
+    /// concentric map's (Shirley and Chiu 1997), which needs no angle per
+    /// lane: the same distribution, other points for the same `u`.
+    #[inline(always)]
+    pub(crate) fn sample_visible<F: Float>(alpha: F, wi: V3<F>, u: V2<F>) -> V3<F> {
+        let (zero, one) = (F::cst(0.0), F::cst(1.0));
+        let vh = V3::new(alpha * wi.x, alpha * wi.y, wi.z).normalize();
+        let lensq = vh.x * vh.x + vh.y * vh.y;
+        let tilted = lensq.gt(0.0);
+        let inv = F::select(tilted, lensq.sqrt().recip(), zero);
+        let t1 = V3::new(
+            F::select(tilted, -vh.y * inv, one),
+            F::select(tilted, vh.x * inv, zero),
+            zero,
+        );
+        let t2 = vh.cross(t1);
+        let disk = warp::square_to_uniform_disk_concentric(u);
+        let p1 = disk.x;
+        let s = (vh.z + 1.0) * 0.5;
+        let p2 = (-s + 1.0) * (-(p1 * p1) + 1.0).max(zero).sqrt() + s * disk.y;
+        let nh = t1 * p1 + t2 * p2 + vh * (-(p1 * p1) - p2 * p2 + 1.0).max(zero).sqrt();
+        V3::new(alpha * nh.x, alpha * nh.y, nh.z.max(zero)).normalize()
+    }
 }
 
 /// Complementary error function, |relative error| < 1.2e-7 (Chebyshev fit

@@ -15,6 +15,7 @@ mod conductor;
 mod dielectric;
 mod diffuse;
 pub mod fresnel;
+pub(crate) mod lanes;
 mod mask;
 pub mod microfacet;
 mod normalmap;

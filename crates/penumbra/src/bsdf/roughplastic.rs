@@ -114,7 +114,7 @@ impl RoughPlastic {
 
     /// Table lookup with linear interpolation in cos θ (differentiable in
     /// `cos`: the slope of the interpolating segment).
-    fn transmittance<R: ScalarReal>(&self, cos: R) -> R {
+    pub(crate) fn transmittance<R: ScalarReal>(&self, cos: R) -> R {
         let t = &self.external_transmittance;
         let x = cos.clamp(0.0, 1.0) * (TABLE_RES - 1) as f32;
         let i = (x.val() as usize).min(TABLE_RES - 2);

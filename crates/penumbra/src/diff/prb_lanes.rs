@@ -84,6 +84,9 @@ impl<'a> LaneAdjoint<'a> {
             return None;
         }
         let lanes = LanePath::new(scene, width)?;
+        if !lanes.diffuse_meshes() {
+            return None;
+        }
         let recorded = |ids: &[ParamId]| ids.iter().any(|&id| store.is_recorded(id));
         let mut read = Vec::new();
         let mut reflectance = Vec::with_capacity(scene.shapes.len());

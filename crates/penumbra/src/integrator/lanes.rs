@@ -16,19 +16,23 @@
 //! The estimator is [`PathIntegrator::trace`]'s, step for step (the same
 //! random numbers drawn in the same order), for the scenes whose plugins
 //! have their shading written for lanes so far: triangle meshes (not
-//! instanced) whose BSDFs are all `diffuse`; any emitters. Other scenes,
-//! derivatives and the other integrators take the scalar loop. The images
-//! of both loops agree within noise, not bit for bit: the shading frame
-//! here is built from the shading normal alone, where the scalar loop's
-//! follows the texture's tangent, so the same random numbers give other
-//! (equally distributed) directions.
+//! instanced) and spheres, whose BSDFs are `diffuse` or rough GGX
+//! conductors, dielectrics and plastics of plain parameters
+//! ([`crate::bsdf::lanes`]); textured reflectances on meshes; any
+//! emitters, area lights on meshes. Other scenes, derivatives and the
+//! other integrators take the scalar loop. The images of both loops agree
+//! within noise, not bit for bit: the shading frame here is built from
+//! the shading normal alone, where the scalar loop's follows the
+//! surface's tangent, so the same random numbers give other (equally
+//! distributed) directions.
 
 use super::path::PathIntegrator;
 use super::render::{SampleLayout, Tile};
 use super::{mis_weight, survival_probability, Integrator};
 use crate::ad::lanes::{each_lane, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
-use crate::bsdf::{lambert_eval, lambert_pdf, lambert_sample, Bsdf};
+use crate::bsdf::lambert_eval;
+use crate::bsdf::lanes::{BsdfLanes, LaneBsdf};
 use crate::emitter::{surface_si, Constant, Emitter, EmitterT};
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
@@ -105,12 +109,41 @@ impl CameraGroup {
 
 /// What the loop reads of a shape at each hit.
 struct LaneShape<'a> {
-    mesh: &'a Mesh,
-    /// The diffuse reflectance: its value where it is a plain value, else
-    /// the texture, looked up per lane at the hit's full interaction.
-    reflectance: std::result::Result<Vec3, &'a Texture>,
+    geometry: LaneGeometry<'a>,
+    bsdf: LaneBsdf<'a>,
+    /// The diffuse reflectance of `diffuse` and `roughplastic` (zero for
+    /// the others).
+    albedo: Albedo<'a>,
     /// The shape's `area` emitter, if it has one.
     emission: Option<MeshLight<'a>>,
+}
+
+/// The surface a shape's hits are on.
+#[derive(Clone, Copy)]
+enum LaneGeometry<'a> {
+    /// A triangle mesh: its triangle's corners, normals and face normal.
+    Mesh(&'a Mesh),
+    /// An analytic sphere: the hit's point put back on it along the
+    /// direction from its centre (as the plugin's), which is its normal.
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        flip_normals: bool,
+    },
+}
+
+/// A diffuse reflectance as the loop looks it up.
+#[derive(Clone, Copy)]
+enum Albedo<'a> {
+    /// A plain value.
+    Plain(Vec3),
+    /// A texture over a mesh's uv (not a mesh attribute, see
+    /// [`LanePath::new`]): looked up per lane at an interaction that holds
+    /// only the hit's uv.
+    Textured {
+        mesh: &'a Mesh,
+        texture: &'a Texture,
+    },
 }
 
 /// An `area` emitter on a mesh with a plain radiance value: what its
@@ -238,6 +271,11 @@ pub(crate) struct LanePath<'a> {
     lights: Vec<LaneLight<'a>>,
     /// Lanes per call: 16, 8, 4 or 1 (the last: the scalar loop instead).
     width: usize,
+    /// Whether a shape has another BSDF than `diffuse`.
+    mixed_bsdfs: bool,
+    /// Whether every shape is a mesh with a `diffuse` BSDF (what reverse
+    /// mode in lanes, `diff/prb_lanes.rs`, differentiates).
+    diffuse_meshes: bool,
 }
 
 impl<'a> LanePath<'a> {
@@ -266,20 +304,43 @@ impl<'a> LanePath<'a> {
             .iter()
             .enumerate()
             .map(|(i, shape)| {
-                let (Shape::Mesh(mesh), Bsdf::Diffuse(diffuse)) =
-                    (shape, scene.shape_bsdf(i as u32))
-                else {
-                    return None;
+                let geometry = match shape {
+                    Shape::Mesh(mesh) => LaneGeometry::Mesh(mesh),
+                    Shape::Sphere(sphere) => {
+                        let (center, radius) = sphere.center_radius(&scene.params);
+                        LaneGeometry::Sphere {
+                            center,
+                            radius,
+                            flip_normals: sphere.flip_normals,
+                        }
+                    }
+                    _ => return None,
                 };
-                // an emitting shape: an `area` emitter of a plain radiance
+                let (bsdf, albedo) = LaneBsdf::of(scene.shape_bsdf(i as u32), &store)?;
+                let albedo = match albedo.map(value) {
+                    None => Albedo::Plain(Vec3::ZERO),
+                    Some(Ok(v)) => Albedo::Plain(v),
+                    // textures that read more of the interaction than its
+                    // uv, and textures on spheres, take the scalar loop
+                    Some(Err(Texture::MeshAttribute(_))) => return None,
+                    Some(Err(texture)) => match geometry {
+                        LaneGeometry::Mesh(mesh) => Albedo::Textured { mesh, texture },
+                        LaneGeometry::Sphere { .. } => return None,
+                    },
+                };
+                // an emitting shape: a mesh with an `area` emitter of a
+                // plain radiance
                 let emission = match scene.shape_emitter(i as u32) {
                     None => None,
                     Some(em) => {
-                        let (Emitter::Area(area), true) =
-                            (&scene.emitters[em as usize], mesh.surface_area() > 0.0)
+                        let (LaneGeometry::Mesh(mesh), Emitter::Area(area)) =
+                            (geometry, &scene.emitters[em as usize])
                         else {
                             return None;
                         };
+                        if !(mesh.surface_area() > 0.0) {
+                            return None;
+                        }
                         Some(MeshLight {
                             mesh,
                             radiance: value(&area.radiance).ok()?,
@@ -287,18 +348,21 @@ impl<'a> LanePath<'a> {
                         })
                     }
                 };
-                // textures that read more of the interaction than its uv
-                // take the scalar loop
-                if matches!(diffuse.reflectance, Texture::MeshAttribute(_)) {
-                    return None;
-                }
                 Some(LaneShape {
-                    mesh,
-                    reflectance: value(&diffuse.reflectance),
+                    geometry,
+                    bsdf,
+                    albedo,
                     emission,
                 })
             })
             .collect::<Option<Vec<_>>>()?;
+        let mixed_bsdfs = shapes.iter().any(|s| !matches!(s.bsdf, LaneBsdf::Diffuse));
+        let diffuse_meshes = shapes.iter().all(|s| {
+            matches!(
+                (s.geometry, s.bsdf),
+                (LaneGeometry::Mesh(_), LaneBsdf::Diffuse)
+            )
+        });
         let lights = scene
             .emitters
             .iter()
@@ -324,6 +388,8 @@ impl<'a> LanePath<'a> {
             shapes,
             lights,
             width,
+            mixed_bsdfs,
+            diffuse_meshes,
         })
     }
 
@@ -332,9 +398,20 @@ impl<'a> LanePath<'a> {
         self.scene
     }
 
-    /// The mesh of shape `shape`.
+    /// Whether every shape is a mesh with a `diffuse` BSDF.
+    pub(crate) fn diffuse_meshes(&self) -> bool {
+        self.diffuse_meshes
+    }
+
+    /// The mesh of shape `shape`, of a scene whose shapes are all meshes
+    /// ([`LanePath::diffuse_meshes`]).
     pub(crate) fn mesh(&self, shape: u32) -> &'a Mesh {
-        self.shapes[shape as usize].mesh
+        match self.shapes[shape as usize].geometry {
+            LaneGeometry::Mesh(mesh) => mesh,
+            LaneGeometry::Sphere { .. } => {
+                unreachable!("reverse mode in lanes takes scenes of meshes only")
+            }
+        }
     }
 
     /// Lanes per call.
@@ -478,6 +555,8 @@ impl<'a> LanePath<'a> {
         let (zero, one) = (Lanes::<N>::cst(0.0), Lanes::<N>::cst(1.0));
         let mut result = V3::<Lanes<N>>::zero();
         let mut throughput = V3::splat(one);
+        // the relative index of refraction along each path, for the roulette
+        let mut eta = one;
         let camera_hits = hits.map(|h| h.is_some());
         let mut alive = active;
         // the vertex each ray left and the density of its direction, for
@@ -547,10 +626,26 @@ impl<'a> LanePath<'a> {
             let mut bary = [Vec2::ZERO; N];
             for k in 0..N {
                 let Some(hit) = &hits[k] else { continue };
-                let shape = &self.shapes[hit.shape as usize];
-                (corners[k], normals[k], face_n[k]) =
-                    shape.mesh.corners_primal(&scene.params, hit.prim);
-                bary[k] = hit.uv;
+                match self.shapes[hit.shape as usize].geometry {
+                    LaneGeometry::Mesh(mesh) => {
+                        (corners[k], normals[k], face_n[k]) =
+                            mesh.corners_primal(&scene.params, hit.prim);
+                        bary[k] = hit.uv;
+                    }
+                    // the point as the first corner at barycentrics
+                    // (0, 0), exactly
+                    LaneGeometry::Sphere {
+                        center,
+                        radius,
+                        flip_normals,
+                    } => {
+                        let ray = &rays[k];
+                        let dir = (ray.o + ray.d * hit.t - center).normalize();
+                        let n = if flip_normals { -dir } else { dir };
+                        corners[k][0] = center + dir * radius;
+                        (normals[k][0], face_n[k]) = (n, n);
+                    }
+                }
             }
             let b1 = Lanes::<N>::from_fn(|k| bary[k].x);
             let b2 = Lanes::<N>::from_fn(|k| bary[k].y);
@@ -599,17 +694,14 @@ impl<'a> LanePath<'a> {
             if depth + 1 >= path.max_depth {
                 break;
             }
-            let reflectance = lanes3(|k| {
+            let albedo = lanes3(|k| {
                 let Some(hit) = &hits[k] else {
                     return Vec3::ZERO;
                 };
-                let shape = &self.shapes[hit.shape as usize];
-                match shape.reflectance {
-                    Ok(v) => v,
-                    // a texture over uv (not a mesh attribute, see
-                    // `LanePath::new`) needs no more of the interaction
-                    Err(texture) => {
-                        let uv = shape.mesh.uv_primal(&scene.params, hit.prim, hit.uv);
+                match self.shapes[hit.shape as usize].albedo {
+                    Albedo::Plain(v) => v,
+                    Albedo::Textured { mesh, texture } => {
+                        let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
                         let si = surface_si::<f32>(
                             lane3(p, k),
                             face_n[k],
@@ -622,6 +714,10 @@ impl<'a> LanePath<'a> {
                     }
                 }
             });
+            let bsdf_of = |k: usize| hits[k].map(|hit| self.shapes[hit.shape as usize].bsdf);
+            let mixed = self.mixed_bsdfs
+                && (0..N).any(|k| !matches!(bsdf_of(k), None | Some(LaneBsdf::Diffuse)));
+            let bsdf = BsdfLanes::new(mixed, bsdf_of, albedo, wi);
 
             // next-event estimation: a lane that picks a mesh's area
             // light samples its point there, and the direction, density
@@ -696,7 +792,7 @@ impl<'a> LanePath<'a> {
                 (d_area, pdf_light, weight_light, on_light)
             };
             let wo = frame.to_local(d_em);
-            let f = lambert_eval(wi, wo, reflectance);
+            let f = bsdf.eval(wo);
             let tried = sampled_em & !f.is_zero();
             let visible = LaneMask::<N>::from_fn(|k| {
                 tried.lane(k) && {
@@ -709,7 +805,7 @@ impl<'a> LanePath<'a> {
                 }
             });
             if visible.any() {
-                let mis = mis_weight(pdf_em, lambert_pdf(wi.z, wo));
+                let mis = mis_weight(pdf_em, bsdf.pdf(wo));
                 let w = if any_other {
                     Lanes::select(LaneMask::<N>::from_fn(|k| o_delta[k]), one, mis)
                 } else {
@@ -718,7 +814,9 @@ impl<'a> LanePath<'a> {
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
                 log.next_event(depth, || {
-                    // `lambert_eval` is the reflectance times this
+                    // (a log is kept of scenes of diffuse BSDFs only,
+                    // `LanePath::diffuse_meshes`): `lambert_eval` is the
+                    // reflectance times this
                     let f1 = lambert_eval(wi, wo, V3::splat(one));
                     V3::select(visible, f1.mul_elem(weight) * w, V3::zero())
                 });
@@ -726,32 +824,29 @@ impl<'a> LanePath<'a> {
 
             // continue the paths by BSDF sampling, then Russian roulette
             // on the throughput after the bounce (as the scalar loop)
+            let mut u1 = Lanes::<N>::splat(0.0);
             let mut u2 = V2::new(Lanes::splat(0.0), Lanes::<N>::splat(0.0));
             let mut u_rr = Lanes::<N>::splat(0.0);
             for (k, rng) in rngs.iter_mut().enumerate() {
                 if alive.lane(k) {
-                    rng.next_1d();
+                    u1.0[k] = rng.next_1d();
                     let u = rng.next_2d();
                     (u2.x.0[k], u2.y.0[k]) = (u.x, u.y);
                     u_rr.0[k] = rng.next_1d();
                 }
             }
-            let (wo, pdf, sampled) = lambert_sample(wi.z, u2);
+            let (wo, pdf, weight, eta_wo, sampled) = bsdf.sample(u1, u2);
             let reached = throughput;
-            throughput = throughput.mul_elem(reflectance);
+            throughput = throughput.mul_elem(weight);
+            eta *= eta_wo;
             let (survives, q) =
-                survival_probability(throughput.max_elem(), 1.0, depth, path.rr_depth, u_rr);
+                survival_probability(throughput.max_elem(), eta, depth, path.rr_depth, u_rr);
             let survival = if depth >= path.rr_depth { one / q } else { one };
             if depth >= path.rr_depth {
                 throughput *= survival;
             }
             alive = alive & sampled & survives;
-            log.bounce(
-                depth,
-                reached,
-                reflectance,
-                Lanes::select(alive, survival, zero),
-            );
+            log.bounce(depth, reached, weight, Lanes::select(alive, survival, zero));
             if alive.none() {
                 break;
             }
@@ -922,8 +1017,9 @@ mod tests {
     }
 
     /// The loop in lanes and the scalar loop estimate the same image: on
-    /// cbox (area light, plain reflectances) and textured (bitmap
-    /// reflectances, an environment beside the area light), 128², 128
+    /// cbox (area light, plain reflectances), textured (bitmap
+    /// reflectances, an environment beside the area light) and bsdfs
+    /// (spheres of rough conductor, dielectric and plastic), 128², 128
     /// samples per pixel, over 256 blocks of 8 × 8 pixels, their mean
     /// differences are within 4.5 standard errors (Student's t with 255
     /// degrees of freedom: a chance of 10⁻⁵ per channel if both are
@@ -932,7 +1028,7 @@ mod tests {
     /// scalar image scaled by 1.05: the test sees a bias of that size.
     #[test]
     fn lanes_and_the_scalar_loop_render_the_same_image() {
-        for name in ["cbox", "textured"] {
+        for name in ["cbox", "textured", "bsdfs"] {
             let scene = scene(name, 128);
             let scalar = image(&scene, 128, 1, None);
             for width in widths() {
@@ -970,12 +1066,21 @@ mod tests {
         }
     }
 
-    /// Scenes with plugins not written for lanes take the scalar loop.
+    /// Scenes with plugins not written for lanes take the scalar loop;
+    /// reverse mode in lanes takes diffuse meshes only.
     #[test]
     fn other_scenes_take_the_scalar_loop() {
-        assert!(LanePath::new(&scene("cbox", 16), 8).is_some());
-        assert!(LanePath::new(&scene("cbox", 16), 1).is_none());
-        // a rough conductor and a rough dielectric
-        assert!(LanePath::new(&scene("bsdfs", 16), 8).is_none());
+        let cbox = scene("cbox", 16);
+        assert!(LanePath::new(&cbox, 4).unwrap().diffuse_meshes());
+        assert!(LanePath::new(&cbox, 1).is_none());
+        // spheres and rough BSDFs
+        let bsdfs = scene("bsdfs", 16);
+        assert!(!LanePath::new(&bsdfs, 4).unwrap().diffuse_meshes());
+        // a Beckmann distribution (bsdfs' conductor otherwise)
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/bsdfs.xml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let text = text.replacen(r#"<string name="distribution" value="ggx"/>"#, "", 1);
+        let beckmann = Scene::load_str(&text, &path, &[("res".into(), "16".into())]).unwrap();
+        assert!(LanePath::new(&beckmann, 4).is_none());
     }
 }

@@ -416,12 +416,12 @@ pub(crate) fn roulette(
 #[inline(always)]
 pub(crate) fn survival_probability<F: Float>(
     t_max: F,
-    eta: f32,
+    eta: F,
     depth: u32,
     rr_depth: u32,
     u: F,
 ) -> (F::Mask, F) {
-    let t_max = t_max * F::cst(eta) * F::cst(eta);
+    let t_max = t_max * eta * eta;
     let carries = t_max.gt(0.0);
     if depth < rr_depth {
         return (carries, F::cst(1.0));
