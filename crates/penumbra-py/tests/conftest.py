@@ -72,6 +72,16 @@ def small_dict(res=24, spp=4, tex=None, rgba=False):
 
 
 @pytest.fixture
+def scalar_loop(monkeypatch):
+    """Primal images on the scalar loop, the one derivatives replay: the
+    loop in lanes (forward renders of scenes whose plugins are written for
+    lanes) estimates the same image with other directions for the same
+    random numbers, so finite differences of its images are not the
+    derivatives of the scalar loop's estimate."""
+    monkeypatch.setenv("PENUMBRA_LANES", "1")
+
+
+@pytest.fixture
 def small_scene():
     return pn.load_dict(small_dict())
 

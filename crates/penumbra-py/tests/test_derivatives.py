@@ -49,6 +49,7 @@ def finite_difference(scene, key, t, eps=EPS):
     return (hi - lo) / (2 * eps)
 
 
+@pytest.mark.usefixtures("scalar_loop")
 @pytest.mark.parametrize("key", KEYS)
 def test_forward_matches_finite_differences(scene, key):
     p = pn.traverse(scene)
@@ -79,6 +80,7 @@ def test_backward_is_the_transpose_of_forward(scene, key):
     assert abs(lhs - rhs) <= 1e-3 * (np.abs(g).sum() * np.abs(t).max() + 1e-9), (lhs, rhs)
 
 
+@pytest.mark.usefixtures("scalar_loop")
 def test_backward_of_a_loss_matches_finite_differences(scene):
     key = "ball.bsdf.reflectance.value"
     p = pn.traverse(scene)

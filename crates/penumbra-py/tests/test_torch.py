@@ -42,6 +42,7 @@ def test_gradcheck(scene):
     assert torch.autograd.gradcheck(f, (x, tex), eps=1e-2, atol=1e-4, rtol=1e-3, fast_mode=True)
 
 
+@pytest.mark.usefixtures("scalar_loop")
 def test_gradient_matches_finite_differences_of_a_loss(scene):
     target = torch.from_numpy(pn.render(scene, spp=2, seed=1))
     latent = torch.tensor([0.1, -0.3, 0.7], dtype=torch.float64, requires_grad=True)

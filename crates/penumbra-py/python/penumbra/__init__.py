@@ -19,7 +19,11 @@ estimate.
 ``gradient_seed(seed)``, decorrelated from the image's samples (as
 Mitsuba's ``seed_grad``): the same samples would bias the gradient of a
 non-linear loss. Pass ``seed_grad=seed`` for the exact derivative of the
-image rendered with ``seed``.
+image rendered with ``seed``. Both hold for images rendered on the scalar
+loop: forward renders of scenes whose plugins are all written for lanes
+take the loop in lanes, the same image estimated with other directions
+for the same random numbers; set the environment variable
+``PENUMBRA_LANES=1`` for finite-difference checks.
 Geometry and camera parameters (flagged discontinuous) get the interior
 term of their derivative and, in both modes, the boundary terms of
 primary visibility (edges and outlines seen by a pinhole or orthographic
