@@ -170,11 +170,13 @@ struct MixedLanes<'a, const N: usize> {
     /// The factor of reflection, and of a dielectric's transmission.
     specular: V3<Lanes<N>>,
     transmit: V3<Lanes<N>>,
-    /// A plastic's plugin (its transmittance table), the transmittance
-    /// into it along `wi` and the probability of sampling its coating.
+    /// A plastic's plugin (its transmittance table), the probability of
+    /// sampling its coating, and its diffuse base's value per unit of the
+    /// transmittance out along `wo` times `cos θo` (what depends on `wi`
+    /// alone of the plugin's `coated_diffuse`).
     plastics: [Option<&'a RoughPlastic>; N],
-    t_i: Lanes<N>,
     p_coating: Lanes<N>,
+    base: V3<Lanes<N>>,
 }
 
 impl<'a, const N: usize> BsdfLanes<'a, N> {
@@ -251,7 +253,7 @@ impl<'a, const N: usize> MixedLanes<'a, N> {
             specular: V3::splat(Lanes::splat(1.0)),
             transmit: V3::splat(Lanes::splat(1.0)),
             plastics: [None; N],
-            t_i: Lanes::splat(0.0),
+            base: V3::zero(),
             p_coating: Lanes::splat(0.0),
         };
         let set = |v: &mut V3<Lanes<N>>, k: usize, x: Vec3| {
@@ -297,9 +299,20 @@ impl<'a, const N: usize> MixedLanes<'a, N> {
                     // as the plugin's context: the coating is sampled in
                     // proportion to its reflectance along wi
                     let t_i = plastic.transmittance(wi.z.0[k]);
-                    b.t_i.0[k] = t_i;
                     b.p_coating.0[k] =
                         specular_probability(1.0 - t_i, plastic.specular_sampling_weight);
+                    let rho = Vec3::new(albedo.x.0[k], albedo.y.0[k], albedo.z.0[k]);
+                    let internal = plastic.internal_reflectance;
+                    let denom = if plastic.nonlinear {
+                        Vec3::ONE - rho * internal
+                    } else {
+                        Vec3::splat(1.0 - internal)
+                    };
+                    set(
+                        &mut b.base,
+                        k,
+                        rho / denom * (t_i / (eta * eta) * FRAC_1_PI),
+                    );
                 }
                 _ => {}
             }
@@ -346,7 +359,7 @@ impl<'a, const N: usize> MixedLanes<'a, N> {
             let (fr, ..) = fresnel_dielectric_primal(wi.dot(m), eta);
             let coating = Lanes::select(dg.gt(0.0), fr * dg / (wi.z * 4.0), zero);
             let t_o = self.plastic_transmittance(wo.z);
-            let v = self.specular * coating + self.plastic_base(t_o, wo.z);
+            let v = self.specular * coating + self.base * (t_o * wo.z);
             f = V3::select(self.plastic & above, v, f);
         }
         f
@@ -463,24 +476,6 @@ impl<'a, const N: usize> MixedLanes<'a, N> {
     #[inline(always)]
     fn plastic_transmittance(&self, cos: Lanes<N>) -> Lanes<N> {
         Lanes::from_fn(|k| self.plastics[k].map_or(0.0, |p| p.transmittance(cos.0[k])))
-    }
-
-    /// A plastic's diffuse base under its coating, entered along `wi`
-    /// and left along a direction of cosine `cos_o` with transmittance
-    /// `t_o` (as the plugin's `coated_diffuse`).
-    #[inline(always)]
-    fn plastic_base(&self, t_o: Lanes<N>, cos_o: Lanes<N>) -> Spectrum<Lanes<N>> {
-        let eta = self.eta.x;
-        let internal =
-            Lanes::<N>::from_fn(|k| self.plastics[k].map_or(0.0, |p| p.internal_reflectance));
-        let nonlinear = LaneMask::<N>::from_fn(|k| self.plastics[k].is_some_and(|p| p.nonlinear));
-        let rho = self.albedo;
-        let denom = V3::select(
-            nonlinear,
-            -(rho * internal) + V3::splat(Lanes::splat(1.0)),
-            V3::splat(-internal + 1.0),
-        );
-        rho.div_elem(denom) * (self.t_i * t_o / (eta * eta) * (cos_o * FRAC_1_PI))
     }
 }
 
