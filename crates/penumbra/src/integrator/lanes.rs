@@ -42,6 +42,7 @@ use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::ParamView;
 use crate::sampler::SampleStream;
 use crate::scene::Scene;
+use crate::sensor::Camera;
 use crate::texture::{Texture, TextureT};
 use glam::{Vec2, Vec3};
 
@@ -527,10 +528,19 @@ impl<'a> LanePath<'a> {
             rngs: [SampleStream::PLACEHOLDER; PACKET],
             count,
         };
+        // a pinhole camera's rays are made in lanes, all at once
+        let pinhole = matches!(layout.sensor.camera, Camera::Perspective(_));
+        let mut film = [Vec2::ZERO; PACKET];
         for k in 0..count {
             let (p, cs, rng) = layout.camera_sample_of(x, y, key, first + k as u32);
-            (group.pos[k], group.rays[k], group.rngs[k]) =
-                (p, cs.ray::<f32>(&self.store).val(), rng);
+            (group.pos[k], film[k], group.rngs[k]) = (p, cs.film, rng);
+            if !pinhole {
+                group.rays[k] = cs.ray::<f32>(&self.store).val();
+            }
+        }
+        if pinhole {
+            let made = layout.sensor.pinhole_rays(&film, &mut group.rays);
+            debug_assert!(made);
         }
         group.hits = intersect_camera_rays(self.scene, &group.rays, count);
         group

@@ -11,15 +11,16 @@ pub use orthographic::Orthographic;
 pub use perspective::Perspective;
 pub use thinlens::ThinLens;
 
-use crate::ad::ScalarReal;
+use crate::ad::lanes::Lanes;
+use crate::ad::{Real, ScalarReal};
 use crate::error::{Error, Result};
-use crate::geometry::DiffRay;
+use crate::geometry::{DiffRay, Ray};
 use crate::image::{Film, ReconstructionFilter};
 use crate::math::{Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::sampler::{Independent, Sampler};
 use crate::scene::description::{Class, Node};
-use glam::{Mat4, Vec2};
+use glam::{Mat4, Vec2, Vec3};
 
 /// The camera models.
 #[derive(Clone, Debug)]
@@ -117,15 +118,6 @@ impl<R: ScalarReal> ToWorld<R> {
         })
     }
 
-    /// Row `k` of the linear part applied to `v`, summed in the order of
-    /// glam's matrix product, so that `R = f32` reproduces [`Transform`]
-    /// bit for bit (the reference images do not change).
-    #[inline(always)]
-    fn row(&self, k: usize, v: V3<R>) -> R {
-        let m = &self.0[4 * k..4 * k + 3];
-        v.x * m[0] + v.y * m[1] + v.z * m[2]
-    }
-
     #[inline(always)]
     pub(crate) fn point(&self, p: V3<R>) -> V3<R> {
         let row = |k: usize| self.row(k, p) + self.0[4 * k + 3];
@@ -135,6 +127,17 @@ impl<R: ScalarReal> ToWorld<R> {
         } else {
             V3::new(x / w, y / w, z / w)
         }
+    }
+}
+
+impl<R: Real> ToWorld<R> {
+    /// Row `k` of the linear part applied to `v`, summed in the order of
+    /// glam's matrix product, so that `R = f32` reproduces [`Transform`]
+    /// bit for bit (the reference images do not change).
+    #[inline(always)]
+    fn row(&self, k: usize, v: V3<R>) -> R {
+        let m = &self.0[4 * k..4 * k + 3];
+        v.x * m[0] + v.y * m[1] + v.z * m[2]
     }
 
     #[inline(always)]
@@ -265,6 +268,45 @@ impl Sensor {
             Camera::ThinLens(c) => c.ray(store, &to_world, lens_params, film, lens),
             Camera::Orthographic(c) => c.ray(&to_world, film),
         }
+    }
+
+    /// The f32 rays of a pinhole camera through the film positions `film`
+    /// ([`CameraSample::film`]), all at once in lanes (a pixel's packet of
+    /// camera rays): lane by lane the arithmetic of [`Sensor::ray`] in f32,
+    /// so the same rays bit for bit, without a chain of divisions and
+    /// square roots per ray, written to `rays`. False (and `rays` left as
+    /// they are) for the other cameras.
+    #[inline(always)]
+    pub(crate) fn pinhole_rays<const N: usize>(
+        &self,
+        film: &[Vec2; N],
+        rays: &mut [Ray; N],
+    ) -> bool {
+        let Camera::Perspective(c) = &self.camera else {
+            return false;
+        };
+        let o = ToWorld(self.primal.to_world).point(V3::<f32>::zero()).val();
+        let (tan_x, [ox, oy]) = self.primal.lens;
+        let lens = (Lanes::splat(tan_x), [Lanes::splat(ox), Lanes::splat(oy)]);
+        let pos = [Lanes::from_fn(|k| film[k].x), Lanes::from_fn(|k| film[k].y)];
+        let v = c.frustum.direction::<Lanes<N>>(lens, pos);
+        let len = v.length();
+        let d = ToWorld(self.primal.to_world.map(Lanes::splat))
+            .vector(v)
+            .normalize();
+        let (near, far) = (c.frustum.near, c.frustum.far);
+        // written ray by ray, not through `std::array::from_fn`, whose
+        // closure may be left out of line, without the lanes' target
+        // features
+        for (k, ray) in rays.iter_mut().enumerate() {
+            *ray = Ray {
+                o,
+                d: Vec3::new(d.x.0[k], d.y.0[k], d.z.0[k]),
+                tmin: near * len.0[k],
+                tmax: far * len.0[k],
+            };
+        }
+        true
     }
 
     /// True if rays need a lens sample (thin lens with an aperture).
@@ -465,10 +507,13 @@ impl Frustum {
     /// added to the film position before the mapping.
     /// `lens` is `(tan(x_fov / 2), principal point offset)` as
     /// [`Frustum::read`] gives them.
+    /// In any [`Real`]: film positions in lanes give the rays of a block
+    /// of samples (`Sensor::pinhole_rays`).
     #[inline(always)]
-    fn direction<R: ScalarReal>(&self, (tan_x, [ox, oy]): (R, [R; 2]), pos: Vec2) -> V3<R> {
-        let x = (R::cst(1.0 - 2.0 * pos.x) - ox * 2.0) * tan_x;
-        let y = (R::cst(1.0 - 2.0 * pos.y) - oy * 2.0) * tan_x / self.aspect;
+    fn direction<R: Real>(&self, (tan_x, [ox, oy]): (R, [R; 2]), pos: [R::Prim; 2]) -> V3<R> {
+        let from_film = |p: R::Prim| R::from_prim(R::Prim::cst(1.0) - p * 2.0);
+        let x = (from_film(pos[0]) - ox * 2.0) * tan_x;
+        let y = (from_film(pos[1]) - oy * 2.0) * tan_x / self.aspect;
         V3::new(x, y, R::cst(1.0))
     }
 }

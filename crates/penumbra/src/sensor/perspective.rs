@@ -39,7 +39,7 @@ impl Perspective {
         // to_world (the same direction as normalising before it too): the
         // camera ray starts every sample, and its chain of square roots
         // and divisions was its latency.
-        let v = self.frustum.direction::<R>(lens, pos);
+        let v = self.frustum.direction::<R>(lens, [pos.x, pos.y]);
         let len = v.val().length();
         DiffRay {
             o: to_world.point(crate::math::V3::zero()),

@@ -454,3 +454,34 @@ fn thinlens_focuses_at_the_far_clip_by_default() {
         [50.0]
     );
 }
+
+/// A pixel's camera rays made in lanes are the f32 rays of each sample bit
+/// for bit (the loop in lanes and the scalar loop start from the same
+/// rays); other cameras do not make them.
+#[test]
+fn pinhole_rays_in_lanes_are_the_f32_rays() {
+    let scene = perspective();
+    let sensor = &scene.sensors[0];
+    let store = scene.params.primal();
+    let mut rng = crate::sampler::SampleStream::PLACEHOLDER;
+    for _ in 0..64 {
+        let film: [Vec2; 16] = std::array::from_fn(|_| rng.next_2d() * 1.2 - Vec2::splat(0.1));
+        let mut rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); 16];
+        assert!(sensor.pinhole_rays(&film, &mut rays));
+        for (ray, film) in rays.iter().zip(film) {
+            let expected = sensor.ray::<f32>(&store, film, Vec2::ZERO).val();
+            assert_eq!(
+                ray.o.to_array().map(f32::to_bits),
+                expected.o.to_array().map(f32::to_bits)
+            );
+            assert_eq!(
+                ray.d.to_array().map(f32::to_bits),
+                expected.d.to_array().map(f32::to_bits)
+            );
+            assert_eq!(ray.tmin.to_bits(), expected.tmin.to_bits());
+            assert_eq!(ray.tmax.to_bits(), expected.tmax.to_bits());
+        }
+    }
+    let mut rays = [crate::geometry::Ray::new(Vec3::ZERO, Vec3::Z); 4];
+    assert!(!thinlens().sensors[0].pinhole_rays(&[Vec2::ZERO; 4], &mut rays));
+}

@@ -62,8 +62,8 @@ impl ThinLens {
         lens: Vec2,
     ) -> DiffRay<R> {
         // d.z == 1
-        let focus =
-            self.frustum.direction::<R>(lens_params, pos) * store.read::<R>(self.focus_distance, 0);
+        let focus = self.frustum.direction::<R>(lens_params, [pos.x, pos.y])
+            * store.read::<R>(self.focus_distance, 0);
         let l = Vec2::from(warp::square_to_uniform_disk_concentric(lens.into()));
         let r = store.read::<R>(self.aperture_radius, 0);
         let o = V3::new(r * l.x, r * l.y, R::cst(0.0));
