@@ -20,6 +20,8 @@
 //! same values at every width.
 
 use super::{Float, Mask, Real};
+use crate::math::V3;
+use glam::Vec3;
 use std::fmt::{self, Debug};
 use std::ops::{
     Add, AddAssign, BitAnd, BitAndAssign, BitOr, BitOrAssign, Div, DivAssign, Mul, MulAssign, Neg,
@@ -330,6 +332,23 @@ impl<const N: usize> Float for Lanes<N> {
     fn finite(self) -> LaneMask<N> {
         self.test(self, |a, _| a.is_finite())
     }
+}
+
+/// The lanes of a vector whose value in lane `k` is `f(k)`.
+#[inline(always)]
+pub(crate) fn lanes3<const N: usize>(mut f: impl FnMut(usize) -> Vec3) -> V3<Lanes<N>> {
+    let v: [Vec3; N] = each_lane(&mut f);
+    V3::new(
+        Lanes::<N>::from_fn(|k| v[k].x),
+        Lanes::<N>::from_fn(|k| v[k].y),
+        Lanes::<N>::from_fn(|k| v[k].z),
+    )
+}
+
+/// Lane `k` of a vector.
+#[inline(always)]
+pub(crate) fn lane3<const N: usize>(v: V3<Lanes<N>>, k: usize) -> Vec3 {
+    Vec3::new(v.x.0[k], v.y.0[k], v.z.0[k])
 }
 
 #[cfg(test)]

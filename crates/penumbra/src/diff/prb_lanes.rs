@@ -37,6 +37,7 @@
 //! which records whole paths.
 
 use super::prb::TileSums;
+use crate::ad::lanes::lane3;
 use crate::ad::lanes::{each_lane, LaneMask, Lanes};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Float, Mask, Var};
@@ -44,7 +45,7 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
 use crate::image::film::AdjointImage;
-use crate::integrator::lanes::{lane3, run_lanes, LaneKernel, LanePath, PathLog};
+use crate::integrator::lanes::{run_lanes, LaneKernel, LanePath, PathLog};
 use crate::integrator::render::{SampleLayout, Tile};
 use crate::math::V3;
 use crate::params::{ParamId, ParamView};

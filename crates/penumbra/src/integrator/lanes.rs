@@ -29,7 +29,7 @@
 use super::path::PathIntegrator;
 use super::render::{SampleLayout, Tile};
 use super::{mis_weight, survival_probability, Integrator};
-use crate::ad::lanes::{each_lane, widest_lanes, LaneMask, Lanes};
+use crate::ad::lanes::{each_lane, lane3, lanes3, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::bsdf::lambert_eval;
 use crate::bsdf::lanes::{BsdfLanes, LaneBsdf};
@@ -139,8 +139,8 @@ enum Albedo<'a> {
     /// A plain value.
     Plain(Vec3),
     /// A texture over a mesh's uv (not a mesh attribute, see
-    /// [`LanePath::new`]): looked up per lane at an interaction that holds
-    /// only the hit's uv.
+    /// [`LanePath::new`]): looked up at an interaction that holds only the
+    /// hit's uv (bitmaps in lanes).
     Textured {
         mesh: &'a Mesh,
         texture: &'a Texture,
@@ -704,26 +704,7 @@ impl<'a> LanePath<'a> {
             if depth + 1 >= path.max_depth {
                 break;
             }
-            let albedo = lanes3(|k| {
-                let Some(hit) = &hits[k] else {
-                    return Vec3::ZERO;
-                };
-                match self.shapes[hit.shape as usize].albedo {
-                    Albedo::Plain(v) => v,
-                    Albedo::Textured { mesh, texture } => {
-                        let uv = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
-                        let si = surface_si::<f32>(
-                            lane3(p, k),
-                            face_n[k],
-                            uv,
-                            Vec3::Z,
-                            hit.shape,
-                            hit.prim,
-                        );
-                        texture.eval(store, &si).val()
-                    }
-                }
-            });
+            let albedo = self.albedo(&hits, p, &face_n);
             let bsdf_of = |k: usize| hits[k].map(|hit| self.shapes[hit.shape as usize].bsdf);
             let mixed = self.mixed_bsdfs
                 && (0..N).any(|k| !matches!(bsdf_of(k), None | Some(LaneBsdf::Diffuse)));
@@ -879,23 +860,57 @@ impl<'a> LanePath<'a> {
         }
         (result, camera_hits)
     }
-}
 
-/// The lanes of a vector whose value in lane `k` is `f(k)`.
-#[inline(always)]
-fn lanes3<const N: usize>(mut f: impl FnMut(usize) -> Vec3) -> V3<Lanes<N>> {
-    let v: [Vec3; N] = each_lane(&mut f);
-    V3::new(
-        Lanes::<N>::from_fn(|k| v[k].x),
-        Lanes::<N>::from_fn(|k| v[k].y),
-        Lanes::<N>::from_fn(|k| v[k].z),
-    )
-}
-
-/// Lane `k` of a vector.
-#[inline(always)]
-pub(crate) fn lane3<const N: usize>(v: V3<Lanes<N>>, k: usize) -> Vec3 {
-    Vec3::new(v.x.0[k], v.y.0[k], v.z.0[k])
+    /// The diffuse reflectance at each lane's hit (zero where none): plain
+    /// values, and each texture looked up once for all the lanes that read
+    /// it (a bitmap in lanes,
+    /// [`Bitmap::eval_lanes`](crate::texture::Bitmap::eval_lanes)).
+    #[inline(always)]
+    fn albedo<const N: usize>(
+        &self,
+        hits: &[Option<Hit>; N],
+        p: V3<Lanes<N>>,
+        face_n: &[Vec3; N],
+    ) -> V3<Lanes<N>> {
+        let (scene, store) = (self.scene, &self.store);
+        let albedo_of = |k: usize| hits[k].map(|hit| (hit, self.shapes[hit.shape as usize].albedo));
+        let mut albedo = lanes3(|k| match albedo_of(k) {
+            Some((_, Albedo::Plain(v))) => v,
+            _ => Vec3::ZERO,
+        });
+        let mut uv = V2::new(Lanes::<N>::splat(0.0), Lanes::splat(0.0));
+        let mut textured = [None; N];
+        for k in 0..N {
+            if let Some((hit, Albedo::Textured { mesh, texture })) = albedo_of(k) {
+                let at = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
+                (uv.x.0[k], uv.y.0[k]) = (at.x, at.y);
+                textured[k] = Some(texture);
+            }
+        }
+        while let Some(texture) = textured.iter().find_map(|t| *t) {
+            let reads =
+                LaneMask::<N>::from_fn(|k| textured[k].is_some_and(|t| std::ptr::eq(t, texture)));
+            let value = match texture {
+                Texture::Bitmap(bitmap) => bitmap.eval_lanes(store, uv, reads),
+                _ => lanes3(|k| {
+                    let Some(hit) = hits[k].filter(|_| reads.lane(k)) else {
+                        return Vec3::ZERO;
+                    };
+                    let at = Vec2::new(uv.x.0[k], uv.y.0[k]);
+                    let si =
+                        surface_si::<f32>(lane3(p, k), face_n[k], at, Vec3::Z, hit.shape, hit.prim);
+                    texture.eval(store, &si).val()
+                }),
+            };
+            albedo = V3::select(reads, value, albedo);
+            for (k, t) in textured.iter_mut().enumerate() {
+                if reads.lane(k) {
+                    *t = None;
+                }
+            }
+        }
+        albedo
+    }
 }
 
 /// How many lanes the path tracer in lanes runs: `PENUMBRA_LANES` where

@@ -11,7 +11,7 @@ pub use orthographic::Orthographic;
 pub use perspective::Perspective;
 pub use thinlens::ThinLens;
 
-use crate::ad::lanes::Lanes;
+use crate::ad::lanes::{lane3, Lanes};
 use crate::ad::{Real, ScalarReal};
 use crate::error::{Error, Result};
 use crate::geometry::{DiffRay, Ray};
@@ -20,7 +20,7 @@ use crate::math::{Transform, V3};
 use crate::params::{Domain, ParamFlags, ParamId, ParamStore, ParamView};
 use crate::sampler::{Independent, Sampler};
 use crate::scene::description::{Class, Node};
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2};
 
 /// The camera models.
 #[derive(Clone, Debug)]
@@ -301,7 +301,7 @@ impl Sensor {
         for (k, ray) in rays.iter_mut().enumerate() {
             *ray = Ray {
                 o,
-                d: Vec3::new(d.x.0[k], d.y.0[k], d.z.0[k]),
+                d: lane3(d, k),
                 tmin: near * len.0[k],
                 tmax: far * len.0[k],
             };

@@ -2,7 +2,8 @@
 //! surface uv with bilinear or nearest filtering.
 
 use super::TextureT;
-use crate::ad::ScalarReal;
+use crate::ad::lanes::{lanes3, LaneMask, Lanes};
+use crate::ad::{Float, ScalarReal};
 use crate::error::Result;
 use crate::geometry::SurfaceInteraction;
 use crate::image::Image;
@@ -332,14 +333,7 @@ impl Bitmap {
     /// [`Bitmap::lookup`] without derivatives, reading the texels `data`
     /// directly (the same arithmetic as a lookup whose uv does not move).
     fn lookup_primal(&self, data: &[f32], uv: Vec2) -> Vec3 {
-        // texel i (row-major), its channels read as one vector
-        let texel = |i: usize| {
-            if self.channels == 3 {
-                Vec3::from_slice(&data[3 * i..3 * i + 3])
-            } else {
-                Vec3::splat(data[i])
-            }
-        };
+        let texel = |i: usize| self.texel_primal(data, i);
         match self.filter {
             FilterType::Nearest => texel(self.nearest(uv)),
             FilterType::Bilinear => {
@@ -355,6 +349,74 @@ impl Bitmap {
                 }
                 v
             }
+        }
+    }
+
+    /// [`TextureT::eval`] in f32 at the uv `uv` (before `to_uv`) of each
+    /// lane of `lanes`, all at once (the loop in lanes); zero in the other
+    /// lanes. Bilinear filtering runs the arithmetic of
+    /// [`Bitmap::lookup_primal`] in lanes, the same terms in the same
+    /// order, so the same value in each lane; the texels are read lane by
+    /// lane.
+    #[inline(always)]
+    pub(crate) fn eval_lanes<const N: usize>(
+        &self,
+        store: &ParamView,
+        uv: V2<Lanes<N>>,
+        lanes: LaneMask<N>,
+    ) -> V3<Lanes<N>> {
+        let data = store.data(self.data);
+        let m = &store.data(self.to_uv)[..6];
+        let u = uv.x * m[0] + uv.y * m[1] + m[2];
+        let v = uv.x * m[3] + uv.y * m[4] + m[5];
+        if self.filter == FilterType::Nearest {
+            let value = |k: usize| {
+                let texel = self.nearest(Vec2::new(u.0[k], v.0[k]));
+                self.texel_primal(data, texel)
+            };
+            return lanes3(|k| if lanes.lane(k) { value(k) } else { Vec3::ZERO });
+        }
+        let (w, h) = (self.width, self.height);
+        let x = u * w as f32 - 0.5;
+        let y = v * h as f32 - 0.5;
+        let (mut fx, mut fy) = (x, y);
+        let mut taps = [[0usize; 4]; N];
+        for k in 0..N {
+            if lanes.lane(k) {
+                let (x0, y0) = (floor_i64(x.0[k]), floor_i64(y.0[k]));
+                (fx.0[k], fy.0[k]) = (x.0[k] - x0 as f32, y.0[k] - y0 as f32);
+                let (xa, xb) = (self.wrap.wrap(x0, w), self.wrap.wrap(x0 + 1, w));
+                let (ya, yb) = (self.wrap.wrap(y0, h), self.wrap.wrap(y0 + 1, h));
+                taps[k] = [ya * w + xa, ya * w + xb, yb * w + xa, yb * w + xb];
+            }
+        }
+        // the weights of `bilinear_terms`, and its sum with zero weights
+        // skipped (adding zero instead leaves the sum as it is)
+        let (gx, gy) = (Lanes::splat(1.0) - fx, Lanes::splat(1.0) - fy);
+        let weights = [gx * gy, fx * gy, gx * fy, fx * fy];
+        let mut value = V3::<Lanes<N>>::zero();
+        for (t, weight) in weights.into_iter().enumerate() {
+            let texel = lanes3(|k| {
+                if lanes.lane(k) {
+                    self.texel_primal(data, taps[k][t])
+                } else {
+                    Vec3::ZERO
+                }
+            });
+            let term = texel * weight;
+            value += V3::select(weight.equals(0.0), V3::zero(), term);
+        }
+        value
+    }
+
+    /// Texel `i` (row-major) of the texels `data`, its channels read as
+    /// one vector.
+    #[inline(always)]
+    fn texel_primal(&self, data: &[f32], i: usize) -> Vec3 {
+        if self.channels == 3 {
+            Vec3::from_slice(&data[3 * i..3 * i + 3])
+        } else {
+            Vec3::splat(data[i])
         }
     }
 
@@ -851,5 +913,52 @@ mod tests {
             Vec3::splat(0.5)
         ));
         assert!((b.eval_1::<f32>(&ctx.store.primal(), &si) - 0.5).abs() < 1e-6);
+    }
+
+    /// A block of lookups in lanes gives each lane the value of the f32
+    /// lookup, bit for bit: every filter and wrap mode, a `to_uv`, uvs
+    /// inside and outside [0, 1]², texel centres and edges (zero weights),
+    /// and zero in the lanes left out.
+    #[test]
+    fn lookups_in_lanes_are_the_f32_lookups() {
+        let to_uv = Transform::new(
+            glam::Mat4::from_scale(Vec3::new(2.0, 1.0, 1.0))
+                * glam::Mat4::from_translation(Vec3::new(0.1, -0.3, 0.0)),
+        )
+        .unwrap();
+        let mut rng = crate::sampler::SampleStream::PLACEHOLDER;
+        for filter in [FilterType::Bilinear, FilterType::Nearest] {
+            for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
+                for t in [Transform::IDENTITY, to_uv] {
+                    let (b, ctx) = make(filter, wrap, t);
+                    let store = ctx.store.primal();
+                    for round in 0..64 {
+                        let uv: [Vec2; 8] = std::array::from_fn(|k| match (round % 4, k % 2) {
+                            // on texel centres and between them
+                            (0, _) => Vec2::new((k as f32 + 0.5) / 4.0, (round % 3) as f32 / 6.0),
+                            (_, 0) => rng.next_2d() * 3.0 - Vec2::splat(1.0),
+                            _ => rng.next_2d(),
+                        });
+                        let lanes = LaneMask::<8>::from_fn(|k| k != 3);
+                        let uv_lanes =
+                            V2::new(Lanes::from_fn(|k| uv[k].x), Lanes::from_fn(|k| uv[k].y));
+                        let v = b.eval_lanes(&store, uv_lanes, lanes);
+                        for (k, uv) in uv.iter().enumerate() {
+                            let expected = if k == 3 {
+                                Vec3::ZERO
+                            } else {
+                                at(&b, &ctx, uv.x, uv.y)
+                            };
+                            let got = crate::ad::lanes::lane3(v, k);
+                            assert_eq!(
+                                got.to_array().map(f32::to_bits),
+                                expected.to_array().map(f32::to_bits),
+                                "{filter:?} {wrap:?} at {uv}: {got} in lanes, {expected} in f32"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }
