@@ -45,7 +45,7 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
 use crate::image::film::AdjointImage;
-use crate::integrator::lanes::{run_lanes, LaneKernel, LanePath, PathLog};
+use crate::integrator::lanes::{run_lanes, CameraGroup, LaneKernel, LanePath, PathLog};
 use crate::integrator::render::{SampleLayout, Tile};
 use crate::math::V3;
 use crate::params::{ParamId, ParamView};
@@ -176,11 +176,12 @@ impl<'a> LaneAdjoint<'a> {
         // per shape, the adjoints of a uniform reflectance over the tile
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
         let mut non_finite = 0;
+        let mut group = CameraGroup::new();
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
                 while first < layout.spp {
-                    let mut group = self.lanes.camera_group(layout, x, y, first);
+                    self.lanes.camera_group(layout, x, y, first, &mut group);
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
                         let mut block = group.block::<N>(at);
