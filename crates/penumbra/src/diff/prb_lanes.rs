@@ -45,7 +45,9 @@ use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
 use crate::image::film::AdjointImage;
-use crate::integrator::lanes::{run_lanes, CameraGroup, LaneKernel, LanePath, PathLog};
+use crate::integrator::lanes::{
+    run_lanes, CameraGroup, LaneKernel, LanePath, PathLog, SampleBlock,
+};
 use crate::integrator::render::{SampleLayout, Tile};
 use crate::math::V3;
 use crate::params::{ParamId, ParamView};
@@ -177,6 +179,7 @@ impl<'a> LaneAdjoint<'a> {
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
+        let mut block = SampleBlock::<N>::new();
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
@@ -184,7 +187,7 @@ impl<'a> LaneAdjoint<'a> {
                     self.lanes.camera_group(layout, x, y, first, &mut group);
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
-                        let mut block = group.block::<N>(at);
+                        group.block::<N>(at, &mut block);
                         let delta: [[f32; 3]; N] =
                             each_lane(|k| adjoint.gather(filter, block.pos[k].x, block.pos[k].y));
                         // a sample without adjoint radiance is not shaded
@@ -194,11 +197,16 @@ impl<'a> LaneAdjoint<'a> {
                         if active.none() {
                             continue;
                         }
-                        let hits = each_lane(|k| if active.lane(k) { block.hits[k] } else { None });
+                        let mut hits =
+                            each_lane(|k| if active.lane(k) { block.hits[k] } else { None });
                         log.vertices.clear();
-                        let (l, _) =
-                            self.lanes
-                                .trace(block.rays, hits, active, &mut block.rngs, &mut log);
+                        let (l, _) = self.lanes.trace(
+                            &mut block.rays,
+                            &mut hits,
+                            active,
+                            &mut block.rngs,
+                            &mut log,
+                        );
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
@@ -441,12 +449,13 @@ mod tests {
                     for first in [0u32, 4, 8, 12] {
                         let samples: [_; 4] =
                             std::array::from_fn(|k| layout.camera_sample(x, y, first + k as u32));
-                        let rays = std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
+                        let mut rays =
+                            std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
                         let mut rngs = samples.clone().map(|s| s.2);
                         let mut log = Replay::<4>::default();
                         let all = LaneMask::<4>::from_fn(|_| true);
-                        let hits = rays.map(|r| scene.intersect(&r));
-                        let (l, _) = lanes.trace(rays, hits, all, &mut rngs, &mut log);
+                        let mut hits = rays.map(|r| scene.intersect(&r));
+                        let (l, _) = lanes.trace(&mut rays, &mut hits, all, &mut rngs, &mut log);
                         let swept = log.sweep(V3::zero(), |_, _, _, _| {});
                         for k in 0..4 {
                             let (a, b) = (lane3(l, k), lane3(swept, k));

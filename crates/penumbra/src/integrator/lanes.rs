@@ -94,28 +94,36 @@ impl CameraGroup {
         self.count
     }
 
-    /// Samples `at..at + N` of the group in `N` lanes: lanes past the
-    /// group's end repeat its last sample's position and ray, without a
-    /// hit or a stream, and are inactive.
+    /// Samples `at..at + N` of the group in `N` lanes, written to `b`:
+    /// lanes past the group's end repeat its last sample's position and
+    /// ray, without a hit or a stream, and are inactive.
     #[inline(always)]
-    pub(crate) fn block<const N: usize>(&mut self, at: usize) -> SampleBlock<N> {
+    pub(crate) fn block<const N: usize>(&mut self, at: usize, b: &mut SampleBlock<N>) {
         const { assert!(PACKET.is_multiple_of(N)) };
-        let mut b = SampleBlock {
-            pos: [Vec2::ZERO; N],
-            rays: [Ray::new(Vec3::ZERO, Vec3::Z); N],
-            hits: [None; N],
-            rngs: [SampleStream::PLACEHOLDER; N],
-            active: LaneMask::from_fn(|k| at + k < self.count),
-        };
+        b.active = LaneMask::from_fn(|k| at + k < self.count);
         for k in 0..N {
             let i = (at + k).min(self.count - 1);
             (b.pos[k], b.rays[k]) = (self.pos[i], self.rays[i]);
             if at + k < self.count {
                 b.hits[k] = self.hits[i];
                 b.rngs[k] = std::mem::replace(&mut self.rngs[i], SampleStream::PLACEHOLDER);
+            } else {
+                (b.hits[k], b.rngs[k]) = (None, SampleStream::PLACEHOLDER);
             }
         }
-        b
+    }
+}
+
+impl<const N: usize> SampleBlock<N> {
+    /// An empty block, for [`CameraGroup::block`] to fill.
+    pub(crate) fn new() -> SampleBlock<N> {
+        SampleBlock {
+            pos: [Vec2::ZERO; N],
+            rays: [Ray::new(Vec3::ZERO, Vec3::Z); N],
+            hits: [None; N],
+            rngs: [SampleStream::PLACEHOLDER; N],
+            active: LaneMask::from_fn(|_| false),
+        }
     }
 }
 
@@ -479,6 +487,7 @@ impl<'a> LanePath<'a> {
         let filter = &layout.sensor.film.rfilter;
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
+        let mut b = SampleBlock::<N>::new();
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
@@ -486,14 +495,16 @@ impl<'a> LanePath<'a> {
                     self.camera_group(layout, x, y, first, &mut group);
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
+                        group.block::<N>(at, &mut b);
                         let SampleBlock {
                             pos,
                             rays,
                             hits,
-                            mut rngs,
+                            rngs,
                             active,
-                        } = group.block::<N>(at);
-                        let (l, hit) = self.trace(rays, hits, active, &mut rngs, &mut ());
+                        } = &mut b;
+                        let (active, pos) = (*active, *pos);
+                        let (l, hit) = self.trace(rays, hits, active, rngs, &mut ());
                         // samples with a non-finite value are left out
                         let finite = l.x.finite() & l.y.finite() & l.z.finite();
                         let keep = each_lane(|k| active.lane(k) && finite.lane(k));
@@ -562,8 +573,8 @@ impl<'a> LanePath<'a> {
     #[inline(always)]
     pub(crate) fn trace<const N: usize>(
         &self,
-        mut rays: [Ray; N],
-        mut hits: [Option<Hit>; N],
+        rays: &mut [Ray; N],
+        hits: &mut [Option<Hit>; N],
         active: LaneMask<N>,
         rngs: &mut [SampleStream; N],
         log: &mut impl PathLog<N>,
@@ -575,7 +586,7 @@ impl<'a> LanePath<'a> {
         let mut throughput = V3::splat(one);
         // the relative index of refraction along each path, for the roulette
         let mut eta = one;
-        let camera_hits = hits.map(|h| h.is_some());
+        let camera_hits = each_lane(|k| hits[k].is_some());
         let mut alive = active;
         // the vertex each ray left and the density of its direction, for
         // the MIS weights of emitters it reaches
