@@ -37,8 +37,7 @@
 //! which records whole paths.
 
 use super::prb::TileSums;
-use crate::ad::lanes::lane3;
-use crate::ad::lanes::{each_lane, LaneMask, Lanes};
+use crate::ad::lanes::{each_lane, lane3, LaneMask, Lanes};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Float, Mask, Var};
 use crate::bsdf::Bsdf;

@@ -723,7 +723,7 @@ impl<'a> LanePath<'a> {
             if depth + 1 >= path.max_depth {
                 break;
             }
-            let albedo = self.albedo(&hits, p, &face_n);
+            let albedo = self.albedo(hits, p, &face_n);
             let bsdf_of = |k: usize| hits[k].map(|hit| self.shapes[hit.shape as usize].bsdf);
             let mixed = self.mixed_bsdfs
                 && (0..N).any(|k| !matches!(bsdf_of(k), None | Some(LaneBsdf::Diffuse)));
