@@ -551,9 +551,9 @@ impl<'a> LanePath<'a> {
         // a pinhole camera's rays are made in lanes, all at once
         let pinhole = matches!(layout.sensor.camera, Camera::Perspective(_));
         let mut film = [Vec2::ZERO; PACKET];
-        for k in 0..count {
+        for (k, at) in film.iter_mut().enumerate().take(count) {
             let (p, cs, rng) = layout.camera_sample_of(x, y, key, first + k as u32);
-            (group.pos[k], film[k], group.rngs[k]) = (p, cs.film, rng);
+            (group.pos[k], *at, group.rngs[k]) = (p, cs.film, rng);
             if !pinhole {
                 group.rays[k] = cs.ray::<f32>(&self.store).val();
             }
@@ -693,7 +693,7 @@ impl<'a> LanePath<'a> {
                 p: lane3(p, k),
                 n: face_n[k],
             };
-            log.vertex(depth, &hits, p, &face_n);
+            log.vertex(depth, hits, p, &face_n);
 
             // emission of a surface hit by the previous BSDF sample: on
             // the front side (as `Area::eval_surface`), weighted against
@@ -899,11 +899,11 @@ impl<'a> LanePath<'a> {
         });
         let mut uv = V2::new(Lanes::<N>::splat(0.0), Lanes::splat(0.0));
         let mut textured = [None; N];
-        for k in 0..N {
+        for (k, t) in textured.iter_mut().enumerate() {
             if let Some((hit, Albedo::Textured { mesh, texture })) = albedo_of(k) {
                 let at = mesh.uv_primal(&scene.params, hit.prim, hit.uv);
                 (uv.x.0[k], uv.y.0[k]) = (at.x, at.y);
-                textured[k] = Some(texture);
+                *t = Some(texture);
             }
         }
         while let Some(texture) = textured.iter().find_map(|t| *t) {

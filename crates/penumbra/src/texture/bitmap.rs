@@ -381,13 +381,13 @@ impl Bitmap {
         let y = v * h as f32 - 0.5;
         let (mut fx, mut fy) = (x, y);
         let mut taps = [[0usize; 4]; N];
-        for k in 0..N {
+        for (k, taps) in taps.iter_mut().enumerate() {
             if lanes.lane(k) {
                 let (x0, y0) = (floor_i64(x.0[k]), floor_i64(y.0[k]));
                 (fx.0[k], fy.0[k]) = (x.0[k] - x0 as f32, y.0[k] - y0 as f32);
                 let (xa, xb) = (self.wrap.wrap(x0, w), self.wrap.wrap(x0 + 1, w));
                 let (ya, yb) = (self.wrap.wrap(y0, h), self.wrap.wrap(y0 + 1, h));
-                taps[k] = [ya * w + xa, ya * w + xb, yb * w + xa, yb * w + xb];
+                *taps = [ya * w + xa, ya * w + xb, yb * w + xa, yb * w + xb];
             }
         }
         // the weights of `bilinear_terms`, and its sum with zero weights
