@@ -22,7 +22,13 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
       [--jobs grad_rev_bsdf grad_rev_tex grad_fwd_albedo vol_hetero_rev]
-      [--memory cbox|volume_hetero] [--exe PATH] [--mitsuba-lanes N [N ...]]
+      [--memory cbox|volume_hetero] [--rounds 3] [--exe PATH] [--mitsuba-lanes N [N ...]]
+
+--rounds R (default 3) measures each job's warm times R times, Penumbra and
+Mitsuba one after the other in each round, and gives the ratio as the
+median of the rounds' ratios with their range (the machine's speed drifts
+between minutes; see scripts/bench_vs_mitsuba.py). First calls are those of
+the first round.
 
 --exe times another build of the command (default: `cargo build --release`
 of this checkout, <target>/release/penumbra), e.g. the profile-guided one
@@ -35,6 +41,7 @@ wide where the CPU has AVX-512, 8 with AVX2). The table names the widths.
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -74,6 +81,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--reps', type=int, default=3)
     ap.add_argument('--no-mitsuba', action='store_true')
+    ap.add_argument('--rounds', type=int, default=3,
+                    help='warm times measured this many times per side, the sides alternating')
     ap.add_argument('--jobs', nargs='+', default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_fwd_albedo'])
     ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
@@ -108,6 +117,8 @@ def main():
         'DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1'))
     lanes_heads = ''.join(f' | Mitsuba prb warm s, {n} lanes | {n} lanes / Penumbra warm'
                           for n in a.mitsuba_lanes)
+    print(f'Warm times: medians over {a.rounds} rounds (each side {a.reps} runs in a round); the '
+          "warm ratio is the median of the rounds' ratios, their range in brackets.\n")
     print('| job (128²) | Penumbra first s | Penumbra warm s | Mitsuba prb first s, empty cache '
           '| Mitsuba prb first s (cache files) | Mitsuba prb warm s (lanes) '
           '| Mitsuba warm / Penumbra warm | Mitsuba first, empty cache / Penumbra first '
@@ -118,6 +129,7 @@ def main():
         ours = penumbra(exe, args)
         if a.no_mitsuba:
             mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
+                  'warm_ratio': (float('nan'),) * 3,
                   'drjit_cache_files_at_start': '-', 'llvm_vector_width': '-'}
             cold = {'first_s': float('nan')}
             by_lanes = [float('nan')] * len(a.mitsuba_lanes)
@@ -128,6 +140,15 @@ def main():
                                      capture_output=True, text=True, env=run_env)
                 return last_json(out.stdout, 'RESULT ')
             mi = mitsuba(r, env)
+            # the warm times of each round, the sides one after the other
+            warm = [(ours['warm_median_s'], mi['warm_median_s'])]
+            for _ in range(a.rounds - 1):
+                warm.append((penumbra(exe, args)['warm_median_s'],
+                             mitsuba(r, env)['warm_median_s']))
+            ratios = sorted(m / o for o, m in warm)
+            ours['warm_median_s'] = statistics.median(o for o, _ in warm)
+            mi['warm_median_s'] = statistics.median(m for _, m in warm)
+            mi['warm_ratio'] = (statistics.median(ratios), ratios[0], ratios[-1])
             with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
                 cold = mitsuba('1', dict(env, HOME=cold_home))
             by_lanes = [mitsuba(r, env, ['--lanes', str(n)])['warm_median_s']
@@ -135,7 +156,7 @@ def main():
         print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
               f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
               f'| {mi["warm_median_s"]:.3f} ({mi["llvm_vector_width"]}) '
-              f'| {mi["warm_median_s"] / ours["warm_median_s"]:.2f} '
+              f'| {mi["warm_ratio"][0]:.2f} ({mi["warm_ratio"][1]:.2f}–{mi["warm_ratio"][2]:.2f}) '
               f'| {cold["first_s"] / ours["first_s"]:.2f} '
               f'| {mi["first_s"] / ours["first_s"]:.2f}'
               + ''.join(f' | {t:.3f} | {t / ours["warm_median_s"]:.2f}' for t in by_lanes)

@@ -17,7 +17,7 @@ faster).
 
   python3 scripts/bench_vs_mitsuba.py [--scenes cbox mesh_heavy bsdfs textured]
       [--spp 64] [--reps 3] [--mitsuba-python ~/.cache/penumbra-mitsuba/venv/bin/python]
-      [--max-depth D [D ...]] [--exe PATH] [--mitsuba-lanes N [N ...]]
+      [--rounds 3] [--max-depth D [D ...]] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
 --exe times another build of the command (default: `cargo build --release`
 of this checkout, <target>/release/penumbra), e.g. the profile-guided one
@@ -29,6 +29,14 @@ the narrowest Embree takes), beside the CPU's own width: Dr.Jit compiles 16
 lanes wide where the CPU has AVX-512 and 8 with AVX2, so the same code is
 measured at another machine's width. The table names the widths.
 
+--rounds R (default 3) measures each scene's warm times R times, Penumbra
+and Mitsuba llvm_ad_rgb one after the other in each round, and gives the
+ratio as the median of the rounds' ratios, with their range: on a shared
+machine whose speed drifts between minutes (a process here can take 1.5×
+as long as the one before it, same binary), two sides measured a minute
+apart compare the drift, not the renderers. First calls are measured in
+the first round.
+
 --max-depth renders each scene at each of the given path depths instead of
 its own (1: camera rays and what they see; 2: plus one bounce and the
 light sampled from the first vertex; ...): where the ratio drops with the
@@ -38,6 +46,7 @@ the per-sample work (camera ray, first hit, film).
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -63,6 +72,8 @@ def main():
     ap.add_argument('--scenes', nargs='+', default=['cbox', 'mesh_heavy', 'bsdfs', 'textured'])
     ap.add_argument('--spp', type=int, default=64)
     ap.add_argument('--reps', type=int, default=3)
+    ap.add_argument('--rounds', type=int, default=3,
+                    help='warm times measured this many times per side, the sides alternating')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
     ap.add_argument('--no-scalar', action='store_true', help='skip Mitsuba scalar_rgb (slow)')
@@ -85,13 +96,24 @@ def main():
             ours_depth = [] if depth is None else ['-D', f'max_depth={depth}']
             their_depth = [] if depth is None else ['--max-depth', str(depth)]
             name = s if depth is None else f'{s}, max_depth {depth}'
-            ours = run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp', str(a.spp),
-                             '--reps', str(a.reps), *ours_depth])
+            def penumbra():
+                return run_json([exe, 'bench', os.path.join('scenes', f'{s}.xml'), '--spp',
+                                 str(a.spp), '--reps', str(a.reps), *ours_depth])
             def mitsuba_fwd(variant, reps, run_env, lanes=()):
                 return run_json([a.mitsuba_python, MITSUBA_BENCH, 'fwd', '--scene', s, '--variant',
                                  variant, '--spp', str(a.spp), '--reps', str(reps),
                                  *their_depth, *lanes], run_env, 'RESULT ')
+            ours = penumbra()
             llvm = mitsuba_fwd('llvm_ad_rgb', a.reps, env)
+            # the warm times of each round, the sides one after the other
+            warm = [(ours['warm_median_s'], llvm['warm_median_s'])]
+            for _ in range(a.rounds - 1):
+                warm.append((penumbra()['warm_median_s'],
+                             mitsuba_fwd('llvm_ad_rgb', a.reps, env)['warm_median_s']))
+            ratios = sorted(m / o for o, m in warm)
+            ours['warm_median_s'] = statistics.median(o for o, _ in warm)
+            llvm['warm_median_s'] = statistics.median(m for _, m in warm)
+            llvm['warm_ratio'] = (statistics.median(ratios), ratios[0], ratios[-1])
             llvm['warm_by_lanes'] = [
                 mitsuba_fwd('llvm_ad_rgb', a.reps, env, ['--lanes', str(n)])['warm_median_s']
                 for n in a.mitsuba_lanes]
@@ -103,7 +125,8 @@ def main():
             print(f'{name}: penumbra {ours} | llvm first {llvm["first_s"]:.3f} '
                   f'(cache files at start: {llvm["drjit_cache_files_at_start"]}), '
                   f'first with an empty cache {llvm["first_cold_s"]:.3f}, '
-                  f'warm {llvm["warm_median_s"]:.3f} ({llvm["llvm_vector_width"]} lanes, '
+                  f'warm {llvm["warm_median_s"]:.3f}, ratios by round {ratios} '
+                  f'({llvm["llvm_vector_width"]} lanes, '
                   f'{llvm["llvm_target_cpu"]}), warm at {a.mitsuba_lanes} lanes '
                   f'{llvm["warm_by_lanes"]}', file=sys.stderr, flush=True)
     own = rows[0][2]
@@ -111,6 +134,8 @@ def main():
           f'{own["llvm_vector_width"]} lanes wide.')
     lanes_heads = ''.join(f' | Mitsuba llvm warm s, {n} lanes | llvm {n} lanes / Penumbra warm'
                           for n in a.mitsuba_lanes)
+    print(f'\nWarm times: medians over {a.rounds} rounds (each side {a.reps} renders in a '
+          'round); the warm ratio is the median of the rounds\' ratios, their range in brackets.')
     print(f'\n| scene ({a.spp} spp, 256²) | Penumbra first s | Penumbra warm s | Penumbra peak MB '
           '| Mitsuba llvm first s, empty cache | Mitsuba llvm first s (cache files) '
           '| Mitsuba llvm warm s | Mitsuba llvm peak MB | Mitsuba scalar s '
@@ -124,7 +149,7 @@ def main():
         print(f'| {s} | {o["first_s"]:.3f} | {o["warm_median_s"]:.3f} | {o["peak_rss_mb"]:.0f} '
               f'| {l["first_cold_s"]:.3f} | {l["first_s"]:.3f} ({l["drjit_cache_files_at_start"]}) '
               f'| {l["warm_median_s"]:.3f} | {l["peak_rss_mb_inproc"]:.0f} '
-              f'| {sc_t:.3f} | {l["warm_median_s"] / o["warm_median_s"]:.2f} '
+              f'| {sc_t:.3f} | {l["warm_ratio"][0]:.2f} ({l["warm_ratio"][1]:.2f}–{l["warm_ratio"][2]:.2f}) '
               f'| {l["first_cold_s"] / o["first_s"]:.2f} '
               f'| {l["first_s"] / o["first_s"]:.2f} | {sc_t / o["warm_median_s"]:.2f}{by_lanes} |')
 

@@ -178,7 +178,6 @@ impl<'a> LaneAdjoint<'a> {
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
-        let mut block = SampleBlock::<N>::new();
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
@@ -186,7 +185,7 @@ impl<'a> LaneAdjoint<'a> {
                     self.lanes.camera_group(layout, x, y, first, &mut group);
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
-                        group.block::<N>(at, &mut block);
+                        let block: SampleBlock<N> = group.block(at);
                         let delta: [[f32; 3]; N] =
                             each_lane(|k| adjoint.gather(filter, block.pos[k].x, block.pos[k].y));
                         // a sample without adjoint radiance is not shaded
@@ -199,13 +198,9 @@ impl<'a> LaneAdjoint<'a> {
                         let mut hits =
                             each_lane(|k| if active.lane(k) { block.hits[k] } else { None });
                         log.vertices.clear();
-                        let (l, _) = self.lanes.trace(
-                            &mut block.rays,
-                            &mut hits,
-                            active,
-                            &mut block.rngs,
-                            &mut log,
-                        );
+                        let (l, _) = self
+                            .lanes
+                            .trace(block.rays, &mut hits, active, block.rngs, &mut log);
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
