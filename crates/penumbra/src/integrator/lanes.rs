@@ -68,7 +68,8 @@ pub(crate) struct CameraGroup {
 
 /// `N` samples of a [`CameraGroup`] ([`CameraGroup::block`]), in place:
 /// the loop traces them where the group holds them (copies of the rays,
-/// hits and streams were 4 % of the lanes loop's time on textured).
+/// hits and streams drew 4 % of the lanes loop's perf samples on
+/// textured; 0.85 % fewer instructions without them).
 pub(crate) struct SampleBlock<'g, const N: usize> {
     pub pos: &'g [Vec2; N],
     pub rays: &'g mut [Ray; N],

@@ -309,7 +309,7 @@ impl<'a> SampleLayout<'a> {
     /// `rng` and drawn from there: a stream returned by value, its draw
     /// count just written, was copied out with wider loads than that
     /// write, which stalled store forwarding (3 % of the lanes loop's
-    /// time on textured).
+    /// perf samples on textured).
     #[inline(always)]
     pub fn camera_sample_of(
         &self,
