@@ -41,10 +41,11 @@ wide where the CPU has AVX-512, 8 with AVX2). The table names the widths.
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
+
+from rounds import alternate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -140,15 +141,7 @@ def main():
                                      capture_output=True, text=True, env=run_env)
                 return last_json(out.stdout, 'RESULT ')
             mi = mitsuba(r, env)
-            # the warm times of each round, the sides one after the other
-            warm = [(ours['warm_median_s'], mi['warm_median_s'])]
-            for _ in range(a.rounds - 1):
-                warm.append((penumbra(exe, args)['warm_median_s'],
-                             mitsuba(r, env)['warm_median_s']))
-            ratios = sorted(m / o for o, m in warm)
-            ours['warm_median_s'] = statistics.median(o for o, _ in warm)
-            mi['warm_median_s'] = statistics.median(m for _, m in warm)
-            mi['warm_ratio'] = (statistics.median(ratios), ratios[0], ratios[-1])
+            alternate(lambda: penumbra(exe, args), lambda: mitsuba(r, env), (ours, mi), a.rounds)
             with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
                 cold = mitsuba('1', dict(env, HOME=cold_home))
             by_lanes = [mitsuba(r, env, ['--lanes', str(n)])['warm_median_s']

@@ -46,10 +46,11 @@ the per-sample work (camera ray, first hit, film).
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
+
+from rounds import alternate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -105,15 +106,8 @@ def main():
                                  *their_depth, *lanes], run_env, 'RESULT ')
             ours = penumbra()
             llvm = mitsuba_fwd('llvm_ad_rgb', a.reps, env)
-            # the warm times of each round, the sides one after the other
-            warm = [(ours['warm_median_s'], llvm['warm_median_s'])]
-            for _ in range(a.rounds - 1):
-                warm.append((penumbra()['warm_median_s'],
-                             mitsuba_fwd('llvm_ad_rgb', a.reps, env)['warm_median_s']))
-            ratios = sorted(m / o for o, m in warm)
-            ours['warm_median_s'] = statistics.median(o for o, _ in warm)
-            llvm['warm_median_s'] = statistics.median(m for _, m in warm)
-            llvm['warm_ratio'] = (statistics.median(ratios), ratios[0], ratios[-1])
+            ratios = alternate(penumbra, lambda: mitsuba_fwd('llvm_ad_rgb', a.reps, env),
+                               (ours, llvm), a.rounds)
             llvm['warm_by_lanes'] = [
                 mitsuba_fwd('llvm_ad_rgb', a.reps, env, ['--lanes', str(n)])['warm_median_s']
                 for n in a.mitsuba_lanes]

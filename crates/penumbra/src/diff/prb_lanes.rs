@@ -185,22 +185,29 @@ impl<'a> LaneAdjoint<'a> {
                     self.lanes.camera_group(layout, x, y, first, &mut group);
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
-                        let block: SampleBlock<N> = group.block(at);
+                        let SampleBlock {
+                            pos,
+                            rays,
+                            hits,
+                            rngs,
+                            active,
+                        } = group.block::<N>(at);
                         let delta: [[f32; 3]; N] =
-                            each_lane(|k| adjoint.gather(filter, block.pos[k].x, block.pos[k].y));
+                            each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
                         // a sample without adjoint radiance is not shaded
-                        let active = LaneMask::<N>::from_fn(|k| {
-                            block.active.lane(k) && delta[k] != [0.0; 3]
-                        });
+                        let active =
+                            LaneMask::<N>::from_fn(|k| active.lane(k) && delta[k] != [0.0; 3]);
                         if active.none() {
                             continue;
                         }
-                        let mut hits =
-                            each_lane(|k| if active.lane(k) { block.hits[k] } else { None });
+                        // (the group's hits, read by no one after this block)
+                        for (k, hit) in hits.iter_mut().enumerate() {
+                            if !active.lane(k) {
+                                *hit = None;
+                            }
+                        }
                         log.vertices.clear();
-                        let (l, _) = self
-                            .lanes
-                            .trace(block.rays, &mut hits, active, block.rngs, &mut log);
+                        let (l, _) = self.lanes.trace(rays, hits, active, rngs, &mut log);
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
