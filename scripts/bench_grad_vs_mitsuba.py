@@ -5,6 +5,9 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
   1. The jobs of scripts/mitsuba/bench.py (128², 64 spp unless noted):
        grad_rev_bsdf   reverse mode, dL2/d red.reflectance (cbox, 0.4 grey)
        grad_rev_tex    reverse mode, dL2/d plane texture (textured, 0.5)
+       grad_rev_mixed  reverse mode, dL2/d ground.reflectance (bsdfs, 0.3 grey:
+                       a diffuse ground among rough conductor, dielectric
+                       and plastic spheres)
        grad_fwd_albedo forward mode, d image / d scale of red.reflectance
        vol_hetero_rev  reverse mode, dL2/d density grid (volume_hetero, 0.3,
                        32 spp; Mitsuba's prbvolpath), with --jobs
@@ -21,7 +24,7 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
      should not grow with depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
-      [--jobs grad_rev_bsdf grad_rev_tex grad_fwd_albedo vol_hetero_rev]
+      [--jobs grad_rev_bsdf grad_rev_tex grad_rev_mixed grad_fwd_albedo vol_hetero_rev]
       [--memory cbox|volume_hetero] [--rounds 3] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
 --rounds R (default 3) measures each job's warm times R times, Penumbra and
@@ -84,7 +87,8 @@ def main():
     ap.add_argument('--no-mitsuba', action='store_true')
     ap.add_argument('--rounds', type=int, default=3,
                     help='warm times measured this many times per side, the sides alternating')
-    ap.add_argument('--jobs', nargs='+', default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_fwd_albedo'])
+    ap.add_argument('--jobs', nargs='+',
+                    default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_rev_mixed', 'grad_fwd_albedo'])
     ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
@@ -107,6 +111,10 @@ def main():
                          'plane.bsdf.reflectance.data', '--init', '0.5', '--target',
                          'scenes/refs/textured_target128.exr', '--spp', '64', '--reps', r,
                          '-o', 'out/bench_grad'],
+        'grad_rev_mixed': ['scenes/bsdfs.xml', '-D', 'res=128', '--param',
+                           'ground.bsdf.reflectance.value', '--init', '0.3', '--target',
+                           'scenes/refs/bsdfs_target128.exr', '--spp', '64', '--reps', r,
+                           '-o', 'out/bench_grad'],
         'grad_fwd_albedo': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
                             '--mode', 'forward', '--spp', '64', '--reps', r, '-o', 'out/bench_grad'],
         'vol_hetero_rev': ['scenes/volume_hetero.xml', '-D', 'res=128', '--param',

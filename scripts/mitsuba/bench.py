@@ -15,6 +15,7 @@ Tasks (see README.md for the exact definition of each):
   target        pre-compute the 128x128 L2-loss target of --scene (scenes/refs/)
   grad_rev_bsdf reverse-mode dL2/d(red.reflectance) on cbox with prb
   grad_rev_tex  reverse-mode dL2/d(plane texture) on textured with prb
+  grad_rev_mixed reverse-mode dL2/d(ground.reflectance) on bsdfs (mixed BSDFs), prb
   grad_fwd_albedo forward-mode d image / d(scale of red.reflectance) on cbox, prb
   grad_geom_fwd forward-mode d image / d(x-translation of mesh 'obj') on geom,
                 --integrator prb | direct_projective | prb_projective |
@@ -181,6 +182,27 @@ def task_grad_rev_bsdf(a):
     g = np.array([o[0][0].ravel() for o in outs])
     return dict(t, load_s=load_s, param=key, init=[0.4, 0.4, 0.4],
                 true=[0.570068, 0.0430135, 0.0443706],
+                loss='mean over pixels & channels of (img - target)^2',
+                grad_per_call=g.tolist(), grad_mean=g.mean(0).tolist(),
+                grad_std=g.std(0, ddof=1).tolist(),
+                loss_per_call=[o[1] for o in outs], res=GRAD_RES)
+
+
+def task_grad_rev_mixed(a):
+    """Reverse mode on a scene of mixed BSDFs: dL2/d(ground.reflectance) on
+    bsdfs (a diffuse ground among rough conductor, dielectric and plastic
+    spheres, whose parameters are not differentiated)."""
+    mi, dr = C.setup('llvm_ad_rgb')
+    scene, load_s = C.load_scene('bsdfs', res=GRAD_RES)
+    target = get_target('bsdfs', GRAD_RES, scene)
+    integ = mi.load_dict({'type': 'prb', 'max_depth': 8})
+    params = mi.traverse(scene)
+    key = 'ground.bsdf.reflectance.value'
+    params[key] = mi.Color3f(0.3, 0.3, 0.3)
+    params.update()
+    t, outs = _reverse(scene, params, [key], integ, target, a.spp, a.reps, a.extra)
+    g = np.array([o[0][0].ravel() for o in outs])
+    return dict(t, load_s=load_s, param=key, init=[0.3, 0.3, 0.3], true=[0.5, 0.5, 0.5],
                 loss='mean over pixels & channels of (img - target)^2',
                 grad_per_call=g.tolist(), grad_mean=g.mean(0).tolist(),
                 grad_std=g.std(0, ddof=1).tolist(),

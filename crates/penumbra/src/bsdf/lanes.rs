@@ -21,7 +21,7 @@ use super::{lambert_eval, lambert_pdf, lambert_sample, Bsdf, RoughPlastic};
 use crate::ad::lanes::{LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::math::{warp, Spectrum, V2, V3};
-use crate::params::ParamView;
+use crate::params::{ParamId, ParamView};
 use crate::texture::Texture;
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -59,9 +59,15 @@ pub(crate) enum LaneBsdf<'a> {
 /// The value of a texture that is a plain value.
 fn plain(texture: &Texture, store: &ParamView) -> Option<Vec3> {
     match texture {
-        Texture::Uniform(u) => Some(u.value::<f32>(store).val()),
+        Texture::Uniform(u) if !store.is_recorded(u.id) => Some(u.value::<f32>(store).val()),
         _ => None,
     }
+}
+
+/// A scalar parameter's value, held constant by the lanes: `None` where
+/// it is recorded for derivatives.
+fn constant(id: ParamId, store: &ParamView) -> Option<f32> {
+    (!store.is_recorded(id)).then(|| store.value(id, 0))
 }
 
 /// An optional factor's plain value (1 where it is not given).
@@ -83,7 +89,9 @@ impl<'a> LaneBsdf<'a> {
     /// `bsdf` written for lanes, with the texture of its diffuse
     /// reflectance, if it has one (the loop looks it up per lane: a plain
     /// value or a texture over uv); `None` where it is not written for
-    /// lanes (see the module documentation).
+    /// lanes (see the module documentation), or where a parameter it holds
+    /// constant (all but the diffuse reflectance) is recorded in `store`:
+    /// reverse mode in lanes differentiates diffuse reflectances only.
     pub(crate) fn of(
         bsdf: &'a Bsdf,
         store: &ParamView,
@@ -102,7 +110,7 @@ impl<'a> LaneBsdf<'a> {
             Bsdf::RoughDielectric(d) => (
                 LaneBsdf::RoughDielectric {
                     alpha: plain_ggx(&d.roughness, store)?,
-                    eta: store.value(d.eta, 0),
+                    eta: constant(d.eta, store)?,
                     reflect: plain_factor(&d.specular_reflectance, store)?,
                     transmit: plain_factor(&d.specular_transmittance, store)?,
                 },
@@ -113,8 +121,8 @@ impl<'a> LaneBsdf<'a> {
                 (
                     LaneBsdf::RoughPlastic {
                         plastic: p,
-                        alpha: ggx.then(|| store.value(p.alpha, 0).max(MIN_ALPHA))?,
-                        eta: store.value(p.eta, 0),
+                        alpha: ggx.then(|| constant(p.alpha, store))??.max(MIN_ALPHA),
+                        eta: constant(p.eta, store)?,
                         specular: plain_factor(&p.specular_reflectance, store)?,
                     },
                     Some(&p.diffuse_reflectance),

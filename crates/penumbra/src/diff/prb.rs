@@ -112,7 +112,33 @@ impl<'a> TileSums<'a> {
     #[inline]
     pub(super) fn add(&mut self, id: ParamId, i: usize, g: f32) {
         let flat = self.offsets[id.0 as usize] + i;
-        let page = flat >> PAGE_BITS;
+        let at = self.slot_of(flat >> PAGE_BITS) * PAGE + (flat & (PAGE - 1));
+        self.values[at] += g;
+    }
+
+    /// Adds `gs` to elements `i..i + gs.len()` of parameter `id` (a
+    /// texel's channels): one page look-up where the run lies in one page,
+    /// the same sums as [`TileSums::add`] element by element.
+    #[inline]
+    pub(super) fn add_run(&mut self, id: ParamId, i: usize, gs: &[f32]) {
+        let flat = self.offsets[id.0 as usize] + i;
+        let within = flat & (PAGE - 1);
+        if within + gs.len() > PAGE {
+            for (j, &g) in gs.iter().enumerate() {
+                self.add(id, i + j, g);
+            }
+            return;
+        }
+        let at = self.slot_of(flat >> PAGE_BITS) * PAGE + within;
+        for (v, &g) in self.values[at..at + gs.len()].iter_mut().zip(gs) {
+            *v += g;
+        }
+    }
+
+    /// The slot of `page` in `values` (counted from 0), given storage the
+    /// first time the tile touches the page.
+    #[inline(always)]
+    fn slot_of(&mut self, page: usize) -> usize {
         let mut slot = self.page_slot[page] as usize;
         if slot == 0 {
             self.pages.push(page as u32);
@@ -122,7 +148,7 @@ impl<'a> TileSums<'a> {
                 self.values.resize(slot * PAGE, 0.0);
             }
         }
-        self.values[(slot - 1) * PAGE + (flat & (PAGE - 1))] += g;
+        slot - 1
     }
 
     /// The tile's sums that are not zero, (parameter, element, sum) (a sum

@@ -1,9 +1,10 @@
 //! Reverse mode in lanes, for the derivatives by diffuse reflectances.
 //!
-//! Where the path tracer renders in lanes (`integrator/lanes.rs`: triangle
-//! meshes with `diffuse` BSDFs) and every recorded parameter is read by
-//! the reflectances alone (plain values or textures; not by an emitter,
-//! a mesh or the camera), the radiance of a path is a polynomial in its
+//! Where the path tracer renders in lanes (`integrator/lanes.rs`: meshes
+//! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
+//! and every recorded parameter is read by the `diffuse` reflectances
+//! alone (plain values or textures; not by another BSDF, an emitter, a
+//! shape or the camera), the radiance of a path is a polynomial in its
 //! vertices' reflectances ρ_d that the lane loop can differentiate without
 //! a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
@@ -17,7 +18,11 @@
 //! ```
 //!
 //! since a diffuse sample's weight f cos θ / pdf is ρ_d and the BSDF value
-//! of the light sample is ρ_d times a factor free of it. So
+//! of the light sample is ρ_d times a factor free of it. A vertex of
+//! another BSDF fits the same recursion with ρ_d its sample's weight, its
+//! light sample's whole contribution (per unit of β_d) counted in E_d and
+//! N_d zero: nothing it reads is differentiated, so its factors are
+//! constants, and its own B_d is never asked for. So
 //! ∂L/∂ρ_d = β_d ⊙ B_d, the radiance that leaves vertex d through its
 //! reflection per unit of reflectance. One pass traces the lanes' paths and
 //! logs (E, N, ρ, β, s) per vertex; a sweep from the last vertex back gives
@@ -40,6 +45,7 @@ use super::prb::TileSums;
 use crate::ad::lanes::{each_lane, lane3, LaneMask, Lanes};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Float, Mask, Var};
+use crate::bsdf::lanes::LaneBsdf;
 use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
@@ -86,16 +92,22 @@ impl<'a> LaneAdjoint<'a> {
             return None;
         }
         let lanes = LanePath::new(scene, width)?;
-        if !lanes.diffuse_meshes() {
-            return None;
-        }
         let recorded = |ids: &[ParamId]| ids.iter().any(|&id| store.is_recorded(id));
         let mut read = Vec::new();
         let mut reflectance = Vec::with_capacity(scene.shapes.len());
         for shape in 0..scene.shapes.len() as u32 {
-            // the loop in lanes renders diffuse BSDFs only
-            let Bsdf::Diffuse(diffuse) = scene.shape_bsdf(shape) else {
-                return None;
+            let bsdf = scene.shape_bsdf(shape);
+            let Bsdf::Diffuse(diffuse) = bsdf else {
+                // another BSDF of the loop in lanes: a vertex's factor in
+                // the log, with no parameter recorded (a plastic's diffuse
+                // base, scaled by its interface, is not a diffuse
+                // reflectance's ρ)
+                let (_, base) = LaneBsdf::of(bsdf, store)?;
+                if base.is_some_and(|t| t.param_ids().is_none_or(|ids| recorded(&ids))) {
+                    return None;
+                }
+                reflectance.push(None);
+                continue;
             };
             let texture = &diffuse.reflectance;
             let ids = texture.param_ids()?;
@@ -231,7 +243,7 @@ impl<'a> LaneAdjoint<'a> {
                                         if !self.store.is_recorded(bitmap.to_uv) {
                                             // texels alone: their weights, no tape
                                             bitmap.scatter_adjoint(self.store, uv, g, |i, d| {
-                                                sums.add(bitmap.data, i, d)
+                                                sums.add_run(bitmap.data, i, d)
                                             });
                                             return;
                                         }
@@ -377,8 +389,17 @@ impl<const N: usize> PathLog<N> for Replay<N> {
         v.emitted += per_throughput();
     }
     #[inline(always)]
-    fn next_event(&mut self, depth: u32, per_reflectance: impl FnOnce() -> V3<Lanes<N>>) {
-        self.at(depth).next_event = per_reflectance();
+    fn next_event(
+        &mut self,
+        depth: u32,
+        contribution: impl FnOnce() -> (V3<Lanes<N>>, V3<Lanes<N>>),
+    ) {
+        // the light sample of a vertex whose BSDF is not `diffuse` counts
+        // as emitted there (see the module documentation)
+        let (per_reflectance, per_throughput) = contribution();
+        let v = self.at(depth);
+        v.next_event = per_reflectance;
+        v.emitted += per_throughput;
     }
     #[inline(always)]
     fn bounce(
@@ -434,12 +455,13 @@ mod tests {
     }
 
     /// The lanes' radiance from the log's factors (the sweep) is the
-    /// radiance the loop traced, lane by lane, on cbox (area light) and
-    /// textured (textures and an environment), roulette included: the
-    /// log misses no contribution and counts none twice.
+    /// radiance the loop traced, lane by lane, on cbox (area light),
+    /// textured (textures and an environment) and bsdfs (rough BSDFs on
+    /// spheres beside a diffuse ground), roulette included: the log misses
+    /// no contribution and counts none twice.
     #[test]
     fn the_sweep_gives_back_the_traced_radiance() {
-        for name in ["cbox", "textured"] {
+        for name in ["cbox", "textured", "bsdfs"] {
             let scene = scene(name, 16, 12);
             let lanes = LanePath::new(&scene, 4).unwrap();
             let layout = SampleLayout::new(&scene, &opts(16, 3)).unwrap();
@@ -477,9 +499,10 @@ mod tests {
     }
 
     /// Where the reverse mode runs in lanes: the scenes and parameters of
-    /// the module documentation, not a camera, a mesh or an emitter.
+    /// the module documentation, not a camera, a mesh, an emitter or a
+    /// BSDF other than `diffuse`.
     #[test]
-    fn lanes_take_the_reflectances_of_diffuse_mesh_scenes_only() {
+    fn lanes_take_the_diffuse_reflectances_only() {
         let takes = |name: &str, key: &str| {
             let scene = scene(name, 8, 6);
             let ids = [scene.params.require(key).unwrap()];
@@ -491,14 +514,24 @@ mod tests {
         assert!(takes("textured", "plane.bsdf.reflectance.data"));
         assert!(!takes("cbox", "light.emitter.radiance.value"));
         assert!(!takes("textured", "env.radiance.value"));
-        assert!(!takes("bsdfs", "ground.bsdf.reflectance.value"));
+        assert!(takes("bsdfs", "ground.bsdf.reflectance.value"));
+        for key in [
+            "conductor.bsdf.alpha.value",
+            "conductor.bsdf.eta.value",
+            "dielectric.bsdf.eta",
+            "plastic.bsdf.alpha",
+            "plastic.bsdf.diffuse_reflectance.value",
+        ] {
+            assert!(!takes("bsdfs", key), "{key}");
+        }
     }
 
     /// The gradient in lanes is the derivative of the image in lanes with
     /// the same random numbers: for an adjoint image w, g · v against the
     /// central difference of Σ w · I(θ ± ε v), on cbox (a plain
-    /// reflectance, each channel) and textured (a texture, along a random
-    /// direction over its texels). max_depth 5 keeps the roulette out
+    /// reflectance, each channel), textured (a texture, along a random
+    /// direction over its texels) and bsdfs (the diffuse ground's
+    /// reflectance among rough BSDFs). max_depth 5 keeps the roulette out
     /// (its survival probability is held fixed by the gradient, not by a
     /// finite difference). The image is a polynomial in θ, so the
     /// difference's error is its rounding, bounded by Σ |w| (|I₊| + |I₋|)
@@ -512,6 +545,7 @@ mod tests {
         for (name, key, directions) in [
             ("cbox", "red.reflectance.value", 3),
             ("textured", "plane.bsdf.reflectance.data", 1),
+            ("bsdfs", "ground.bsdf.reflectance.value", 3),
         ] {
             let mut scene = scene(name, 24, 5);
             let opts = opts(8, 11);
@@ -577,8 +611,9 @@ mod tests {
 
     /// The reverse mode in lanes and the one on a tape estimate the same
     /// gradient at full depth, roulette included: the means of 8 runs each
-    /// (other seeds) of cbox's red reflectance and of the per-channel sum
-    /// of textured's texture gradient differ by less than 4.5 standard
+    /// (other seeds) of cbox's red reflectance, of bsdfs' ground
+    /// reflectance and of the per-channel sum of textured's texture
+    /// gradient differ by less than 4.5 standard
     /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased),
     /// at every width this processor runs.
     /// Their images differ (the two loops' shading frames do), so the
@@ -588,6 +623,7 @@ mod tests {
         for (name, key) in [
             ("cbox", "red.reflectance.value"),
             ("textured", "plane.bsdf.reflectance.data"),
+            ("bsdfs", "ground.bsdf.reflectance.value"),
         ] {
             let scene = scene(name, 24, 12);
             let w: Vec<f32> = noise(24 * 24 * 3, 9)

@@ -199,15 +199,22 @@ pub(crate) trait PathLog<const N: usize> {
     fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
         let _ = (depth, per_throughput);
     }
-    /// The light sample's contribution at `depth` per unit of the
-    /// throughput times the reflectance there.
+    /// The light sample's contribution at `depth`: at `diffuse` vertices
+    /// per unit of the throughput times the reflectance there, and at the
+    /// others (zero in the first) per unit of the throughput (zero in the
+    /// second at `diffuse` vertices).
     #[inline(always)]
-    fn next_event(&mut self, depth: u32, per_reflectance: impl FnOnce() -> V3<Lanes<N>>) {
-        let _ = (depth, per_reflectance);
+    fn next_event(
+        &mut self,
+        depth: u32,
+        contribution: impl FnOnce() -> (V3<Lanes<N>>, V3<Lanes<N>>),
+    ) {
+        let _ = (depth, contribution);
     }
     /// The bounce from `depth`: the throughput that reached the vertex,
-    /// its reflectance (the diffuse sample's weight) and the roulette's
-    /// factor on the throughput after it (0 where the path ended).
+    /// the BSDF sample's weight (a diffuse vertex's reflectance) and the
+    /// roulette's factor on the throughput after it (0 where the path
+    /// ended).
     #[inline(always)]
     fn bounce(
         &mut self,
@@ -282,9 +289,6 @@ pub(crate) struct LanePath<'a> {
     width: usize,
     /// Whether a shape has another BSDF than `diffuse`.
     mixed_bsdfs: bool,
-    /// Whether every shape is a mesh with a `diffuse` BSDF (what reverse
-    /// mode in lanes, `diff/prb_lanes.rs`, differentiates).
-    diffuse_meshes: bool,
 }
 
 impl<'a> LanePath<'a> {
@@ -366,12 +370,6 @@ impl<'a> LanePath<'a> {
             })
             .collect::<Option<Vec<_>>>()?;
         let mixed_bsdfs = shapes.iter().any(|s| !matches!(s.bsdf, LaneBsdf::Diffuse));
-        let diffuse_meshes = shapes.iter().all(|s| {
-            matches!(
-                (s.geometry, s.bsdf),
-                (LaneGeometry::Mesh(_), LaneBsdf::Diffuse)
-            )
-        });
         let lights = scene
             .emitters
             .iter()
@@ -398,7 +396,6 @@ impl<'a> LanePath<'a> {
             lights,
             width,
             mixed_bsdfs,
-            diffuse_meshes,
         })
     }
 
@@ -407,18 +404,13 @@ impl<'a> LanePath<'a> {
         self.scene
     }
 
-    /// Whether every shape is a mesh with a `diffuse` BSDF.
-    pub(crate) fn diffuse_meshes(&self) -> bool {
-        self.diffuse_meshes
-    }
-
-    /// The mesh of shape `shape`, of a scene whose shapes are all meshes
-    /// ([`LanePath::diffuse_meshes`]).
+    /// The mesh of shape `shape`, whose reflectance is a texture (the
+    /// loop looks textures up on meshes only: [`LanePath::new`]).
     pub(crate) fn mesh(&self, shape: u32) -> &'a Mesh {
         match self.shapes[shape as usize].geometry {
             LaneGeometry::Mesh(mesh) => mesh,
             LaneGeometry::Sphere { .. } => {
-                unreachable!("reverse mode in lanes takes scenes of meshes only")
+                unreachable!("the loop in lanes looks textures up on meshes only")
             }
         }
     }
@@ -810,11 +802,19 @@ impl<'a> LanePath<'a> {
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
                 log.next_event(depth, || {
-                    // (a log is kept of scenes of diffuse BSDFs only,
-                    // `LanePath::diffuse_meshes`): `lambert_eval` is the
-                    // reflectance times this
+                    // `lambert_eval` is a diffuse vertex's reflectance
+                    // times this
                     let f1 = lambert_eval(wi, wo, V3::splat(one));
-                    V3::select(visible, f1.mul_elem(weight) * w, V3::zero())
+                    let per_reflectance = f1.mul_elem(weight) * w;
+                    if !mixed {
+                        return (V3::select(visible, per_reflectance, V3::zero()), V3::zero());
+                    }
+                    let diffuse =
+                        LaneMask::<N>::from_fn(|k| matches!(bsdf_of(k), Some(LaneBsdf::Diffuse)));
+                    (
+                        V3::select(visible & diffuse, per_reflectance, V3::zero()),
+                        V3::select(visible & !diffuse, f.mul_elem(weight) * w, V3::zero()),
+                    )
                 });
             }
 
@@ -1096,16 +1096,15 @@ mod tests {
         }
     }
 
-    /// Scenes with plugins not written for lanes take the scalar loop;
-    /// reverse mode in lanes takes diffuse meshes only.
+    /// Scenes with plugins not written for lanes take the scalar loop.
     #[test]
     fn other_scenes_take_the_scalar_loop() {
         let cbox = scene("cbox", 16);
-        assert!(LanePath::new(&cbox, 4).unwrap().diffuse_meshes());
+        assert!(LanePath::new(&cbox, 4).is_some());
         assert!(LanePath::new(&cbox, 1).is_none());
         // spheres and rough BSDFs
         let bsdfs = scene("bsdfs", 16);
-        assert!(!LanePath::new(&bsdfs, 4).unwrap().diffuse_meshes());
+        assert!(LanePath::new(&bsdfs, 4).is_some());
         // a Beckmann distribution (bsdfs' conductor otherwise)
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/bsdfs.xml");
         let text = std::fs::read_to_string(&path).unwrap();

@@ -285,8 +285,9 @@ impl Bitmap {
 
     /// The adjoint of [`Bitmap::eval`] where only the texels are recorded
     /// (`to_uv` is not, so the uv and the filter's weights are constants):
-    /// `add(element, w · g_c)` for each texel element the look-up at `uv`
-    /// reads with weight `w`, channel c's adjoint being `g_c`. The
+    /// `add(first, shares)` for each texel the look-up at `uv` reads with
+    /// weight `w`: its elements from `first` on get `w · g_c` each (channel
+    /// c's adjoint being `g_c`; one element for a one-channel texture). The
     /// transpose of [`Bitmap::lookup_primal`], term for term, so the same
     /// sums as reverse mode through [`Bitmap::lookup`] on a tape, without
     /// one (reverse mode in lanes, `diff/prb_lanes.rs`).
@@ -295,18 +296,16 @@ impl Bitmap {
         store: &ParamView,
         uv: Vec2,
         g: Vec3,
-        mut add: impl FnMut(usize, f32),
+        mut add: impl FnMut(usize, &[f32]),
     ) {
         debug_assert!(!store.is_recorded(self.to_uv));
         let uv = apply_to_uv::<f32>(store, self.to_uv, V2::cst(uv)).val();
         let mut texel = |i: usize, weight: f32| {
             if self.channels == 3 {
-                for (c, g) in g.to_array().into_iter().enumerate() {
-                    add(3 * i + c, g * weight);
-                }
+                add(3 * i, &(g * weight).to_array());
             } else {
                 // one value read into the three channels
-                add(i, (g.x + g.y + g.z) * weight);
+                add(i, &[(g.x + g.y + g.z) * weight]);
             }
         };
         match self.filter {
@@ -674,7 +673,11 @@ mod tests {
                 let n = 4 * 3 * 3;
                 for (u, v) in [(0.2, 0.3), (0.0625, 1.0 / 6.0), (-0.4, 1.3), (0.99, 0.01)] {
                     let mut scattered = vec![0.0f32; n];
-                    b.scatter_adjoint(&store, Vec2::new(u, v), g, |i, d| scattered[i] += d);
+                    b.scatter_adjoint(&store, Vec2::new(u, v), g, |i, d| {
+                        for (s, d) in scattered[i..].iter_mut().zip(d) {
+                            *s += d;
+                        }
+                    });
                     for (e, &got) in scattered.iter().enumerate() {
                         let mut t = vec![0.0; n];
                         t[e] = 1.0;
