@@ -199,10 +199,10 @@ pub(crate) trait PathLog<const N: usize> {
     fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
         let _ = (depth, per_throughput);
     }
-    /// The light sample's contribution at `depth`: at `diffuse` vertices
-    /// per unit of the throughput times the reflectance there, and at the
-    /// others (zero in the first) per unit of the throughput (zero in the
-    /// second at `diffuse` vertices).
+    /// The light sample's contribution at `depth`, in two parts: at
+    /// `diffuse` vertices per unit of the throughput times the reflectance
+    /// there, and at vertices of other BSDFs per unit of the throughput
+    /// (each part zero in the other part's lanes).
     #[inline(always)]
     fn next_event(
         &mut self,
