@@ -169,44 +169,35 @@ def task_target(a):
     return dict(total_s=time.perf_counter() - t0, load_s=load_s, target_scene=a.scene)
 
 
-def task_grad_rev_bsdf(a):
+def _reverse_reflectance(a, scene_name, key, init, true):
+    """Reverse mode by a plain reflectance set to grey `init` (prb, depth 8)."""
     mi, dr = C.setup('llvm_ad_rgb')
-    scene, load_s = C.load_scene('cbox', res=GRAD_RES)
-    target = get_target('cbox', GRAD_RES, scene)
+    scene, load_s = C.load_scene(scene_name, res=GRAD_RES)
+    target = get_target(scene_name, GRAD_RES, scene)
     integ = mi.load_dict({'type': 'prb', 'max_depth': 8})
     params = mi.traverse(scene)
-    key = 'red.reflectance.value'
-    params[key] = mi.Color3f(0.4, 0.4, 0.4)
+    params[key] = mi.Color3f(init, init, init)
     params.update()
     t, outs = _reverse(scene, params, [key], integ, target, a.spp, a.reps, a.extra)
     g = np.array([o[0][0].ravel() for o in outs])
-    return dict(t, load_s=load_s, param=key, init=[0.4, 0.4, 0.4],
-                true=[0.570068, 0.0430135, 0.0443706],
+    return dict(t, load_s=load_s, param=key, init=[init] * 3, true=true,
                 loss='mean over pixels & channels of (img - target)^2',
                 grad_per_call=g.tolist(), grad_mean=g.mean(0).tolist(),
                 grad_std=g.std(0, ddof=1).tolist(),
                 loss_per_call=[o[1] for o in outs], res=GRAD_RES)
+
+
+def task_grad_rev_bsdf(a):
+    return _reverse_reflectance(a, 'cbox', 'red.reflectance.value', 0.4,
+                                [0.570068, 0.0430135, 0.0443706])
 
 
 def task_grad_rev_mixed(a):
     """Reverse mode on a scene of mixed BSDFs: dL2/d(ground.reflectance) on
     bsdfs (a diffuse ground among rough conductor, dielectric and plastic
     spheres, whose parameters are not differentiated)."""
-    mi, dr = C.setup('llvm_ad_rgb')
-    scene, load_s = C.load_scene('bsdfs', res=GRAD_RES)
-    target = get_target('bsdfs', GRAD_RES, scene)
-    integ = mi.load_dict({'type': 'prb', 'max_depth': 8})
-    params = mi.traverse(scene)
-    key = 'ground.bsdf.reflectance.value'
-    params[key] = mi.Color3f(0.3, 0.3, 0.3)
-    params.update()
-    t, outs = _reverse(scene, params, [key], integ, target, a.spp, a.reps, a.extra)
-    g = np.array([o[0][0].ravel() for o in outs])
-    return dict(t, load_s=load_s, param=key, init=[0.3, 0.3, 0.3], true=[0.5, 0.5, 0.5],
-                loss='mean over pixels & channels of (img - target)^2',
-                grad_per_call=g.tolist(), grad_mean=g.mean(0).tolist(),
-                grad_std=g.std(0, ddof=1).tolist(),
-                loss_per_call=[o[1] for o in outs], res=GRAD_RES)
+    return _reverse_reflectance(a, 'bsdfs', 'ground.bsdf.reflectance.value', 0.3,
+                                [0.5, 0.5, 0.5])
 
 
 def task_grad_rev_tex(a):

@@ -109,19 +109,26 @@ fn forward_mode_matches_mitsuba_on_cbox_red_wall() {
     );
 }
 
-#[test]
-fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
-    let mut scene = load("cbox");
-    let key = "red.reflectance.value";
-    let target = read_image(&repo().join("scenes/refs/cbox_target128.exr")).unwrap();
-    scene.params.set(key, &[0.4, 0.4, 0.4]).unwrap();
+/// Reverse mode by a plain reflectance `key` of scene `name` set to grey
+/// `init`, L2 loss against the scene's Mitsuba target: the mean over 6
+/// batches of 64 spp (seeds from `seed0`) against Mitsuba's mean per
+/// channel, within 4 combined standard errors (`mitsuba_se`: Mitsuba's).
+/// Returns the tolerance per channel.
+fn reverse_matches_mitsuba(
+    name: &str,
+    key: &str,
+    init: f32,
+    seed0: u64,
+    mitsuba: [f64; 3],
+    mitsuba_se: [f64; 3],
+) -> [f64; 3] {
+    let mut scene = load(name);
+    let target = read_image(&repo().join(format!("scenes/refs/{name}_target128.exr"))).unwrap();
+    scene.params.set(key, &[init; 3]).unwrap();
     scene.update().unwrap();
-    // Mitsuba 3.9.1, prb depth 8, 64 spp, mean over calls (mitsuba-results)
-    let mitsuba = [-1.9682e-3f64, 1.5450e-3, 2.913e-4];
-    let mitsuba_se = 1e-5;
     let mut per_channel = vec![Vec::new(); 3];
     for b in 0..6 {
-        let o = opts(64, 100 + b);
+        let o = opts(64, seed0 + b);
         let img = render(&scene, &o).unwrap();
         let (_, d_img) = Loss::L2.eval(&img.data, &target.data).unwrap();
         let g = render_backward(&scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
@@ -129,19 +136,34 @@ fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
             per_channel[c].push(*v as f64);
         }
     }
-    for c in 0..3 {
+    std::array::from_fn(|c| {
         let (m, se) = common::mean_se(&per_channel[c]);
-        let tol = 4.0 * (se * se + mitsuba_se * mitsuba_se).sqrt();
+        let tol = 4.0 * (se * se + mitsuba_se[c] * mitsuba_se[c]).sqrt();
         eprintln!(
-            "reverse channel {c}: {m:.4e} ± {se:.1e} (Mitsuba {:.4e})",
+            "{name} reverse channel {c}: {m:.4e} ± {se:.1e} (Mitsuba {:.4e})",
             mitsuba[c]
         );
         assert!(
             (m - mitsuba[c]).abs() < tol,
-            "channel {c}: {m} ± {se} vs {}",
+            "{name} channel {c}: {m} ± {se} vs {}",
             mitsuba[c]
         );
-    }
+        tol
+    })
+}
+
+#[test]
+fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
+    // Mitsuba 3.9.1, prb depth 8, 64 spp, mean over calls (mitsuba-results)
+    let mitsuba = [-1.9682e-3, 1.5450e-3, 2.913e-4];
+    reverse_matches_mitsuba(
+        "cbox",
+        "red.reflectance.value",
+        0.4,
+        100,
+        mitsuba,
+        [1e-5; 3],
+    );
 }
 
 /// Reverse mode by a diffuse reflectance among other BSDFs (bsdfs: the
@@ -150,39 +172,15 @@ fn reverse_mode_matches_mitsuba_on_cbox_red_wall() {
 /// logged as their vertices' own (`diff/prb_lanes.rs`).
 #[test]
 fn reverse_mode_matches_mitsuba_among_rough_bsdfs() {
-    let mut scene = load("bsdfs");
-    let key = "ground.bsdf.reflectance.value";
-    let target = read_image(&repo().join("scenes/refs/bsdfs_target128.exr")).unwrap();
-    scene.params.set(key, &[0.3, 0.3, 0.3]).unwrap();
-    scene.update().unwrap();
     // Mitsuba 3.9.1, prb depth 8, 64 spp, mean and standard error over 32
     // calls (scripts/mitsuba/bench.py grad_rev_mixed --reps 3 --extra 28)
-    let mitsuba = [-4.9977e-2f64, -4.9699e-2, -4.9402e-2];
-    let mitsuba_se = [2.98e-5f64, 2.92e-5, 2.80e-5];
-    let mut per_channel = vec![Vec::new(); 3];
-    for b in 0..6 {
-        let o = opts(64, 300 + b);
-        let img = render(&scene, &o).unwrap();
-        let (_, d_img) = Loss::L2.eval(&img.data, &target.data).unwrap();
-        let g = render_backward(&scene, &d_img, Some(&[key]), &grad_opts(&o)).unwrap();
-        for (c, v) in g.get(key).unwrap().iter().enumerate() {
-            per_channel[c].push(*v as f64);
-        }
-    }
+    let mitsuba = [-4.9977e-2, -4.9699e-2, -4.9402e-2];
+    let mitsuba_se = [2.98e-5, 2.92e-5, 2.80e-5];
+    let key = "ground.bsdf.reflectance.value";
+    let tol = reverse_matches_mitsuba("bsdfs", key, 0.3, 300, mitsuba, mitsuba_se);
     for c in 0..3 {
-        let (m, se) = common::mean_se(&per_channel[c]);
-        let tol = 4.0 * (se * se + mitsuba_se[c] * mitsuba_se[c]).sqrt();
-        eprintln!(
-            "reverse channel {c}: {m:.4e} ± {se:.1e} (Mitsuba {:.4e})",
-            mitsuba[c]
-        );
-        assert!(
-            (m - mitsuba[c]).abs() < tol,
-            "channel {c}: {m} ± {se} vs {}",
-            mitsuba[c]
-        );
         // the comparison resolves a 1 % difference
-        assert!(tol < 0.01 * mitsuba[c].abs(), "channel {c}: ±{tol}");
+        assert!(tol[c] < 0.01 * mitsuba[c].abs(), "channel {c}: ±{}", tol[c]);
     }
 }
 
