@@ -174,7 +174,8 @@ impl<'a> LaneAdjoint<'a> {
     }
 
     /// [`LaneAdjoint::tile`] `N` lanes wide: the samples of each pixel in
-    /// blocks of `N`, as the primal image in lanes takes them.
+    /// blocks of `N`, as the primal image in lanes takes them (with its
+    /// loops, written out: see `LanePath::tile_lanes`).
     #[inline(always)]
     fn tile_lanes<const N: usize>(
         &self,

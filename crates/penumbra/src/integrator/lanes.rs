@@ -456,7 +456,12 @@ impl<'a> LanePath<'a> {
     }
 
     /// The samples of each pixel of `tile` in blocks of `N` (the last one
-    /// of a pixel partly filled), in the scalar loop's order.
+    /// of a pixel partly filled), in the scalar loop's order. Reverse mode
+    /// (`LaneAdjoint::tile_lanes`) walks a tile with the same nested loops,
+    /// written out: the walk shared as a function taking the block's work
+    /// as a closure, or as a `next()` over the blocks, added 1.0 % and
+    /// 1.4 % instructions per sample on textured (the closure's captures
+    /// kept in memory; the state machine's branches).
     #[inline(always)]
     fn tile_lanes<const N: usize>(
         &self,
