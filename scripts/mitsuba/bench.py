@@ -16,6 +16,7 @@ Tasks (see README.md for the exact definition of each):
   grad_rev_bsdf reverse-mode dL2/d(red.reflectance) on cbox with prb
   grad_rev_tex  reverse-mode dL2/d(plane texture) on textured with prb
   grad_rev_mixed reverse-mode dL2/d(ground.reflectance) on bsdfs (mixed BSDFs), prb
+  grad_rev_light reverse-mode dL2/d(light.emitter.radiance) on cbox with prb
   grad_fwd_albedo forward-mode d image / d(scale of red.reflectance) on cbox, prb
   grad_geom_fwd forward-mode d image / d(x-translation of mesh 'obj') on geom,
                 --integrator prb | direct_projective | prb_projective |
@@ -169,8 +170,9 @@ def task_target(a):
     return dict(total_s=time.perf_counter() - t0, load_s=load_s, target_scene=a.scene)
 
 
-def _reverse_reflectance(a, scene_name, key, init, true):
-    """Reverse mode by a plain reflectance set to grey `init` (prb, depth 8)."""
+def _reverse_color(a, scene_name, key, init, true):
+    """Reverse mode by a plain RGB value (a reflectance, a radiance) set to
+    grey `init` (prb, depth 8)."""
     mi, dr = C.setup('llvm_ad_rgb')
     scene, load_s = C.load_scene(scene_name, res=GRAD_RES)
     target = get_target(scene_name, GRAD_RES, scene)
@@ -188,7 +190,7 @@ def _reverse_reflectance(a, scene_name, key, init, true):
 
 
 def task_grad_rev_bsdf(a):
-    return _reverse_reflectance(a, 'cbox', 'red.reflectance.value', 0.4,
+    return _reverse_color(a, 'cbox', 'red.reflectance.value', 0.4,
                                 [0.570068, 0.0430135, 0.0443706])
 
 
@@ -196,8 +198,15 @@ def task_grad_rev_mixed(a):
     """Reverse mode on a scene of mixed BSDFs: dL2/d(ground.reflectance) on
     bsdfs (a diffuse ground among rough conductor, dielectric and plastic
     spheres, whose parameters are not differentiated)."""
-    return _reverse_reflectance(a, 'bsdfs', 'ground.bsdf.reflectance.value', 0.3,
+    return _reverse_color(a, 'bsdfs', 'ground.bsdf.reflectance.value', 0.3,
                                 [0.5, 0.5, 0.5])
+
+
+def task_grad_rev_light(a):
+    """Reverse mode by an emitter's radiance: dL2/d(light.emitter.radiance)
+    on cbox, the area light's radiance set to 10 grey."""
+    return _reverse_color(a, 'cbox', 'light.emitter.radiance.value', 10.0,
+                          [18.387, 13.9873, 6.7536])
 
 
 def task_grad_rev_tex(a):

@@ -1,10 +1,12 @@
-//! Reverse mode in lanes, for the derivatives by diffuse reflectances.
+//! Reverse mode in lanes, for the derivatives by diffuse reflectances and
+//! by emitters' radiances.
 //!
 //! Where the path tracer renders in lanes (`integrator/lanes.rs`: meshes
 //! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
 //! and every recorded parameter is read by the `diffuse` reflectances
-//! alone (plain values or textures; not by another BSDF, an emitter, a
-//! shape or the camera), the radiance of a path is a polynomial in its
+//! (plain values or textures) or by the plain radiances of `area` lights
+//! and `constant` environments alone (not by another BSDF, another
+//! emitter, a shape or the camera), the radiance of a path is a polynomial in its
 //! vertices' reflectances ρ_d that the lane loop can differentiate without
 //! a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
@@ -37,9 +39,20 @@
 //! the point the primal pass looked it up; a plain value once per tile for
 //! the sum of its adjoints. A bitmap whose `to_uv` is not recorded skips
 //! the tape: its look-up's weights are constants, and
-//! `Bitmap::scatter_adjoint` hands each texel its share directly. Scenes
-//! or parameters outside this take the scalar reverse mode of `prb.rs`,
-//! which records whole paths.
+//! `Bitmap::scatter_adjoint` hands each texel its share directly.
+//!
+//! The light of one emitter is linear in its radiance L_e, and nothing
+//! else of the path depends on it (the emitters are picked by their
+//! `sampling_weight`, not their power): each emission the path reaches
+//! and each light sample is β_d ⊙ L_e ⊙ c with c free of L_e (the MIS
+//! weight; for a light sample also the BSDF value over the sample's
+//! density), so ∂L/∂L_e = Σ β_d ⊙ c over the contributions of emitter e,
+//! which the loop hands over as it traces ([`PathLog::light`]) and which
+//! need no sweep. Their adjoints are summed per emitter over a tile and
+//! handed to the radiance once, as a plain reflectance's.
+//!
+//! Scenes or parameters outside this take the scalar reverse mode of
+//! `prb.rs`, which records whole paths.
 
 use super::prb::TileSums;
 use crate::ad::lanes::{each_lane, lane3, LaneMask, Lanes};
@@ -76,6 +89,9 @@ pub(super) struct LaneAdjoint<'a> {
     store: &'a ParamView<'a>,
     /// Per shape, its reflectance where it reads a recorded parameter.
     reflectance: Vec<Option<Reflectance<'a>>>,
+    /// Per emitter, its radiance where it reads a recorded parameter (a
+    /// plain value: see [`LaneAdjoint::new`]).
+    radiance: Vec<Option<&'a Texture>>,
 }
 
 impl<'a> LaneAdjoint<'a> {
@@ -117,24 +133,36 @@ impl<'a> LaneAdjoint<'a> {
             }));
             read.extend(ids);
         }
-        for emitter in &scene.emitters {
-            let radiance = match emitter {
+        let mut radiance = Vec::with_capacity(scene.emitters.len());
+        for (em, emitter) in scene.emitters.iter().enumerate() {
+            let texture = match emitter {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
-                _ => return None,
+                // (what the other emitters read is in no one's `read`)
+                _ => {
+                    radiance.push(None);
+                    continue;
+                }
             };
-            if recorded(&radiance.param_ids()?) {
+            let ids = texture.param_ids()?;
+            // the light of an emitter the loop reads as a plain value is
+            // linear in it; the others' (a textured constant) take the tape
+            let differentiable = recorded(&ids);
+            if differentiable && !lanes.plain_radiance(em as u32) {
                 return None;
             }
+            radiance.push(differentiable.then_some(texture));
+            read.extend(ids);
         }
-        let only_reflectances = scene
+        let only_read = scene
             .params
             .iter()
             .all(|(id, _)| !store.is_recorded(id) || read.contains(&id));
-        only_reflectances.then_some(LaneAdjoint {
+        only_read.then_some(LaneAdjoint {
             lanes,
             store,
             reflectance,
+            radiance,
         })
     }
 
@@ -186,9 +214,19 @@ impl<'a> LaneAdjoint<'a> {
     ) -> usize {
         let scene = self.lanes.scene();
         let filter = &layout.sensor.film.rfilter;
-        let mut log = Replay::<N>::default();
+        let emitters: Vec<u32> = (0..scene.emitters.len() as u32)
+            .filter(|&em| self.radiance[em as usize].is_some())
+            .collect();
+        let mut log = Replay::<N> {
+            reflectances: self.reflectance.iter().any(Option::is_some),
+            per_radiance: vec![V3::zero(); emitters.len()],
+            emitters,
+            ..Default::default()
+        };
         // per shape, the adjoints of a uniform reflectance over the tile
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
+        // per emitter, the adjoints of its radiance over the tile
+        let mut radiance = vec![DVec3::ZERO; scene.emitters.len()];
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
         for y in tile.y0..tile.y0 + tile.h {
@@ -220,6 +258,7 @@ impl<'a> LaneAdjoint<'a> {
                             }
                         }
                         log.vertices.clear();
+                        log.per_radiance.fill(V3::zero());
                         let (l, _) = self.lanes.trace(rays, hits, active, rngs, &mut log);
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
@@ -229,6 +268,12 @@ impl<'a> LaneAdjoint<'a> {
                             Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
                             Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
                         );
+                        for (&em, per_radiance) in log.emitters.iter().zip(&log.per_radiance) {
+                            // (a left-out lane's light may not be finite)
+                            let g = V3::select(keep, delta.mul_elem(*per_radiance), V3::zero());
+                            radiance[em as usize] +=
+                                (0..N).map(|k| lane3(g, k).as_dvec3()).sum::<DVec3>();
+                        }
                         log.sweep(delta, |vertex, k, hit, g| {
                             match self.reflectance[hit.shape as usize] {
                                 None => {}
@@ -272,6 +317,13 @@ impl<'a> LaneAdjoint<'a> {
             {
                 let si =
                     surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, shape as u32, 0);
+                self.scatter(texture, &si, g.as_vec3(), sums);
+            }
+        }
+        for (texture, g) in self.radiance.iter().zip(&radiance) {
+            if let (Some(texture), false) = (texture, *g == DVec3::ZERO) {
+                // (a plain value, the same at any interaction)
+                let si = surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
                 self.scatter(texture, &si, g.as_vec3(), sums);
             }
         }
@@ -335,7 +387,15 @@ impl<const N: usize> Default for Vertex<N> {
 /// The log of one block's paths, vertex by vertex.
 #[derive(Default)]
 struct Replay<const N: usize> {
+    /// Whether to log the vertices (a reflectance is recorded): the sweep
+    /// needs them, the radiances do not.
+    reflectances: bool,
     vertices: Vec<Vertex<N>>,
+    /// The emitters whose radiance is recorded.
+    emitters: Vec<u32>,
+    /// Per emitter of `emitters`, the lanes' ∂L/∂L_e: the sum of the light
+    /// it sent to the camera per unit of its radiance.
+    per_radiance: Vec<V3<Lanes<N>>>,
 }
 
 impl<const N: usize> Replay<N> {
@@ -381,13 +441,35 @@ impl<const N: usize> Replay<N> {
 impl<const N: usize> PathLog<N> for Replay<N> {
     #[inline(always)]
     fn vertex(&mut self, depth: u32, hits: &[Option<Hit>; N], p: V3<Lanes<N>>, n: &[Vec3; N]) {
+        if !self.reflectances {
+            return;
+        }
         let v = self.at(depth);
         (v.hits, v.p, v.n) = (*hits, p, *n);
     }
     #[inline(always)]
     fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
+        if !self.reflectances {
+            return;
+        }
         let v = self.at(depth);
         v.emitted += per_throughput();
+    }
+    #[inline(always)]
+    fn light(
+        &mut self,
+        throughput: V3<Lanes<N>>,
+        per_radiance: impl FnOnce() -> ([Option<u32>; N], V3<Lanes<N>>),
+    ) {
+        if self.emitters.is_empty() {
+            return;
+        }
+        let (emitters, per_radiance) = per_radiance();
+        let light = throughput.mul_elem(per_radiance);
+        for (&em, sum) in self.emitters.iter().zip(&mut self.per_radiance) {
+            let from = LaneMask::<N>::from_fn(|k| emitters[k] == Some(em));
+            *sum += V3::select(from, light, V3::zero());
+        }
     }
     #[inline(always)]
     fn next_event(
@@ -395,6 +477,9 @@ impl<const N: usize> PathLog<N> for Replay<N> {
         depth: u32,
         contribution: impl FnOnce() -> (V3<Lanes<N>>, V3<Lanes<N>>),
     ) {
+        if !self.reflectances {
+            return;
+        }
         // the light sample of a vertex whose BSDF is not `diffuse` counts
         // as emitted there (see the module documentation)
         let (per_reflectance, per_throughput) = contribution();
@@ -410,6 +495,9 @@ impl<const N: usize> PathLog<N> for Replay<N> {
         reflectance: V3<Lanes<N>>,
         survival: Lanes<N>,
     ) {
+        if !self.reflectances {
+            return;
+        }
         let v = self.at(depth);
         (v.throughput, v.reflectance, v.survival) = (throughput, reflectance, survival);
     }
@@ -476,7 +564,10 @@ mod tests {
                         let mut rays =
                             std::array::from_fn(|k| samples[k].1.ray::<f32>(&primal).val());
                         let mut rngs = samples.clone().map(|s| s.2);
-                        let mut log = Replay::<4>::default();
+                        let mut log = Replay::<4> {
+                            reflectances: true,
+                            ..Default::default()
+                        };
                         let all = LaneMask::<4>::from_fn(|_| true);
                         let mut hits = rays.map(|r| scene.intersect(&r));
                         let (l, _) = lanes.trace(&mut rays, &mut hits, all, &mut rngs, &mut log);
@@ -500,10 +591,11 @@ mod tests {
     }
 
     /// Where the reverse mode runs in lanes: the scenes and parameters of
-    /// the module documentation, not a camera, a mesh, an emitter or a
+    /// the module documentation (diffuse reflectances, plain radiances of
+    /// area lights and constant environments), not a camera, a mesh or a
     /// BSDF other than `diffuse`.
     #[test]
-    fn lanes_take_the_diffuse_reflectances_only() {
+    fn lanes_take_the_diffuse_reflectances_and_the_plain_radiances() {
         let takes = |name: &str, key: &str| {
             let scene = scene(name, 8, 6);
             let ids = [scene.params.require(key).unwrap()];
@@ -513,9 +605,12 @@ mod tests {
         };
         assert!(takes("cbox", "red.reflectance.value"));
         assert!(takes("textured", "plane.bsdf.reflectance.data"));
-        assert!(!takes("cbox", "light.emitter.radiance.value"));
-        assert!(!takes("textured", "env.radiance.value"));
+        assert!(takes("cbox", "light.emitter.radiance.value"));
+        assert!(takes("textured", "env.radiance.value"));
         assert!(takes("bsdfs", "ground.bsdf.reflectance.value"));
+        assert!(takes("bsdfs", "light.emitter.radiance.value"));
+        assert!(!takes("cbox", "light.vertex_positions"));
+        assert!(!takes("cbox", "sensor.x_fov"));
         for key in [
             "conductor.bsdf.alpha.value",
             "conductor.bsdf.eta.value",
@@ -530,9 +625,10 @@ mod tests {
     /// The gradient in lanes is the derivative of the image in lanes with
     /// the same random numbers: for an adjoint image w, g · v against the
     /// central difference of Σ w · I(θ ± ε v), on cbox (a plain
-    /// reflectance, each channel), textured (a texture, along a random
-    /// direction over its texels) and bsdfs (the diffuse ground's
-    /// reflectance among rough BSDFs). max_depth 5 keeps the roulette out
+    /// reflectance, and the area light's radiance, each channel), textured
+    /// (a texture, along a random direction over its texels, and the
+    /// constant environment's radiance) and bsdfs (the diffuse ground's
+    /// reflectance among rough BSDFs, and the area light's radiance). max_depth 5 keeps the roulette out
     /// (its survival probability is held fixed by the gradient, not by a
     /// finite difference). The image is a polynomial in θ, so the
     /// difference's error is its rounding, bounded by Σ |w| (|I₊| + |I₋|)
@@ -545,8 +641,11 @@ mod tests {
     fn lane_gradients_are_the_derivatives_of_the_lane_image() {
         for (name, key, directions) in [
             ("cbox", "red.reflectance.value", 3),
+            ("cbox", "light.emitter.radiance.value", 3),
             ("textured", "plane.bsdf.reflectance.data", 1),
+            ("textured", "env.radiance.value", 3),
             ("bsdfs", "ground.bsdf.reflectance.value", 3),
+            ("bsdfs", "light.emitter.radiance.value", 3),
         ] {
             let mut scene = scene(name, 24, 5);
             let opts = opts(8, 11);
@@ -589,7 +688,11 @@ mod tests {
                         .sum::<f64>();
                     (dot, abs)
                 };
-                let eps = 1e-2f32;
+                // a step of 1 % of the parameter's scale: for a radiance
+                // of 25, a step of 0.01 would leave the difference in the
+                // rounding of the image
+                let scale = theta.iter().fold(1.0f32, |m, t| m.max(t.abs()));
+                let eps = 1e-2 * scale;
                 let (p1, a1) = at(eps);
                 let (m1, a2) = at(-eps);
                 let (p2, _) = at(2.0 * eps);
@@ -611,10 +714,10 @@ mod tests {
     }
 
     /// The reverse mode in lanes and the one on a tape estimate the same
-    /// gradient at full depth, roulette included: the means of 8 runs each
-    /// (other seeds) of cbox's red reflectance, of bsdfs' ground
-    /// reflectance and of the per-channel sum of textured's texture
-    /// gradient differ by less than 4.5 standard
+    /// gradient at full depth, roulette included: the means of 16 runs each
+    /// (other seeds, 32 spp) of cbox's red reflectance and light radiance, of
+    /// bsdfs' ground reflectance and environment radiance and of the
+    /// per-channel sum of textured's texture gradient differ by less than 4.5 standard
     /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased),
     /// at every width this processor runs.
     /// Their images differ (the two loops' shading frames do), so the
@@ -623,8 +726,10 @@ mod tests {
     fn lanes_and_the_tape_estimate_the_same_gradient() {
         for (name, key) in [
             ("cbox", "red.reflectance.value"),
+            ("cbox", "light.emitter.radiance.value"),
             ("textured", "plane.bsdf.reflectance.data"),
             ("bsdfs", "ground.bsdf.reflectance.value"),
+            ("bsdfs", "env.radiance.value"),
         ] {
             let scene = scene(name, 24, 12);
             let w: Vec<f32> = noise(24 * 24 * 3, 9)
@@ -638,7 +743,7 @@ mod tests {
             let per_channel = |lanes: Option<&LaneAdjoint>, seed: u64| -> [f64; 3] {
                 let opts = scene
                     .integrator
-                    .derivative_options(&scene, &opts(16, seed))
+                    .derivative_options(&scene, &opts(32, seed))
                     .unwrap();
                 let (sums, non_finite) = backward_pass(&scene, &store, &w, &opts, lanes).unwrap();
                 assert_eq!(non_finite, 0);
@@ -646,7 +751,7 @@ mod tests {
                 std::array::from_fn(|c| g.iter().skip(c).step_by(3).sum())
             };
             let runs = |lanes: Option<&LaneAdjoint>, seed0: u64| -> Vec<[f64; 3]> {
-                (0..8).map(|i| per_channel(lanes, seed0 + i)).collect()
+                (0..16).map(|i| per_channel(lanes, seed0 + i)).collect()
             };
             let b = runs(None, 200);
             // every width this processor runs

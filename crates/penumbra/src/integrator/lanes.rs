@@ -183,7 +183,8 @@ enum LaneLight<'a> {
 /// What a caller of [`LanePath::trace`] learns of each path beyond its
 /// radiance, per depth (0: the vertex the camera ray reaches). Reverse
 /// mode in lanes (`diff/prb_lanes.rs`) keeps the factors of every
-/// contribution so as to differentiate the radiance by the reflectances;
+/// contribution so as to differentiate the radiance by the reflectances
+/// and by the emitters' radiances;
 /// the primal image keeps nothing (`()`, whose empty calls compile away,
 /// closures and all).
 pub(crate) trait PathLog<const N: usize> {
@@ -198,6 +199,21 @@ pub(crate) trait PathLog<const N: usize> {
     #[inline(always)]
     fn emitted(&mut self, depth: u32, per_throughput: impl FnOnce() -> V3<Lanes<N>>) {
         let _ = (depth, per_throughput);
+    }
+    /// Light of single emitters reaching the camera, for the derivatives
+    /// by their radiance: `throughput` the throughput of the lanes' paths
+    /// where it arrives, and per lane the emitter (`None` where there is
+    /// none, or one whose radiance the loop does not read as a plain
+    /// value) and the contribution per unit of the throughput and of that
+    /// emitter's radiance (its surface or environment emission, or a light
+    /// sample; each call one of them).
+    #[inline(always)]
+    fn light(
+        &mut self,
+        throughput: V3<Lanes<N>>,
+        per_radiance: impl FnOnce() -> ([Option<u32>; N], V3<Lanes<N>>),
+    ) {
+        let _ = (throughput, per_radiance);
     }
     /// The light sample's contribution at `depth`, in two parts: at
     /// `diffuse` vertices per unit of the throughput times the reflectance
@@ -415,6 +431,14 @@ impl<'a> LanePath<'a> {
         }
     }
 
+    /// Whether the loop reads emitter `emitter`'s radiance as a plain
+    /// value (an `area` light's on a mesh, a `constant` environment's):
+    /// the light it sends is then linear in that value
+    /// ([`PathLog::light`]).
+    pub(crate) fn plain_radiance(&self, emitter: u32) -> bool {
+        !matches!(self.lights[emitter as usize], LaneLight::Other)
+    }
+
     /// Lanes per call.
     pub(crate) fn width(&self) -> usize {
         self.width
@@ -603,7 +627,9 @@ impl<'a> LanePath<'a> {
                                 let pdf_em = Lanes::splat(Constant::DIRECTION_PDF * pick);
                                 mis_weight(prev_pdf, pdf_em)
                             };
-                            (le, Lanes::select(escaped, w, zero))
+                            let w = Lanes::select(escaped, w, zero);
+                            log.light(throughput, || ([Some(env); N], V3::splat(w)));
+                            (le, w)
                         }
                         _ => {
                             let emitter = &scene.emitters[env as usize];
@@ -701,6 +727,11 @@ impl<'a> LanePath<'a> {
                 };
                 result += V3::select(front, throughput.mul_elem(le) * w, V3::zero());
                 log.emitted(depth, || V3::select(front, le * w, V3::zero()));
+                log.light(throughput, || {
+                    let emitters =
+                        each_lane(|k| light(k).and_then(|_| scene.shape_emitter(hits[k]?.shape)));
+                    (emitters, V3::select(front, V3::splat(w), V3::zero()))
+                });
             }
 
             if depth + 1 >= path.max_depth {
@@ -720,6 +751,9 @@ impl<'a> LanePath<'a> {
             let mut yn = [Vec3::Z; N];
             let mut y_pdf = [0.0; N];
             let mut y_le = [Vec3::ZERO; N];
+            // the emitter of each lane's sample, where its radiance is a
+            // plain value
+            let mut y_em = [None; N];
             // lanes whose emitter is not a mesh: the sample's direction,
             // density, weight, whether it is a delta, and its shadow ray's
             // end: a point, or a direction for an emitter at infinity
@@ -741,8 +775,10 @@ impl<'a> LanePath<'a> {
                                 light.mesh.sample_point(&scene.params, Vec2::new(ux, u.y));
                             (y[k], yn[k], y_pdf[k], y_le[k]) =
                                 (p, n, light.pdf_area, light.radiance);
+                            y_em[k] = Some(em as u32);
                         }
                         LaneLight::Constant { radiance, pick } => {
+                            y_em[k] = Some(em as u32);
                             let (d, pdf) = Constant::sample_direction_primal(Vec2::new(ux, u.y));
                             other[k] = true;
                             (o_d[k], o_pdf[k]) = (d, pdf * pick);
@@ -806,6 +842,11 @@ impl<'a> LanePath<'a> {
                 };
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
+                // a plain radiance's sample weighs it by one over the
+                // sample's density
+                log.light(throughput, || {
+                    (y_em, V3::select(visible, f * (w / pdf_em), V3::zero()))
+                });
                 log.next_event(depth, || {
                     // `lambert_eval` is a diffuse vertex's reflectance
                     // times this
