@@ -23,7 +23,7 @@ fn scene(radiance: &str) -> Scene {
             {sensor}
             <bsdf type="diffuse" id="white"><rgb name="reflectance" value="1, 1, 1"/></bsdf>
             <shape type="sphere"><ref id="white"/></shape>
-            <emitter type="constant"><rgb name="radiance" value="{radiance}"/></emitter>
+            <emitter type="constant" id="env"><rgb name="radiance" value="{radiance}"/></emitter>
         </scene>"#
     );
     Scene::load_str(&xml, Path::new("non_finite.xml"), &[]).unwrap()
@@ -47,6 +47,12 @@ fn counts(radiance: &str) -> (usize, usize, usize) {
     let adjoint = vec![1e-30f32; img.width * img.height * 3];
     let g = render_backward(&s, &adjoint, Some(&[key]), &opts).unwrap();
     assert!(g.get(key).unwrap().iter().all(|v| v.is_finite()));
+    // (reverse mode by the radiance, in lanes too: the same samples left
+    // out)
+    let env = "env.radiance.value";
+    let g_env = render_backward(&s, &adjoint, Some(&[env]), &opts).unwrap();
+    assert!(g_env.get(env).unwrap().iter().all(|v| v.is_finite()));
+    assert_eq!(g_env.non_finite_samples, g.non_finite_samples);
     (
         img.non_finite_samples,
         fwd.non_finite_samples,
