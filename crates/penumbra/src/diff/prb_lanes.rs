@@ -6,7 +6,7 @@
 //! and every recorded parameter is read by the `diffuse` reflectances
 //! (plain values or textures) or by the plain radiances of `area` lights
 //! and `constant` environments alone (not by another BSDF, another
-//! emitter, a shape or the camera), the radiance of a path is a polynomial in its
+//! emitter, a shape or the camera), with no emitters but these, the radiance of a path is a polynomial in its
 //! vertices' reflectances ρ_d that the lane loop can differentiate without
 //! a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
@@ -138,11 +138,12 @@ impl<'a> LaneAdjoint<'a> {
             let texture = match emitter {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
-                // (what the other emitters read is in no one's `read`)
-                _ => {
-                    radiance.push(None);
-                    continue;
-                }
+                // scenes with other emitters keep the tape, as before
+                // radiances were taken: `check-grad` there compares reverse
+                // mode with the scalar loop's forward mode estimate for
+                // estimate (tests/check_grad.rs, whose scenes have point
+                // lights), and the loop in lanes draws other directions
+                _ => return None,
             };
             let ids = texture.param_ids()?;
             // the light of an emitter the loop reads as a plain value is
