@@ -191,7 +191,7 @@ def _reverse_color(a, scene_name, key, init, true):
 
 def task_grad_rev_bsdf(a):
     return _reverse_color(a, 'cbox', 'red.reflectance.value', 0.4,
-                                [0.570068, 0.0430135, 0.0443706])
+                          [0.570068, 0.0430135, 0.0443706])
 
 
 def task_grad_rev_mixed(a):
@@ -199,7 +199,7 @@ def task_grad_rev_mixed(a):
     bsdfs (a diffuse ground among rough conductor, dielectric and plastic
     spheres, whose parameters are not differentiated)."""
     return _reverse_color(a, 'bsdfs', 'ground.bsdf.reflectance.value', 0.3,
-                                [0.5, 0.5, 0.5])
+                          [0.5, 0.5, 0.5])
 
 
 def task_grad_rev_light(a):

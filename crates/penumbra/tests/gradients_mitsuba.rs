@@ -1,7 +1,8 @@
-//! Derivatives against Mitsuba 3's references (the project's reference kit,
-//! copied to scenes/refs; see scenes/README.md): forward mode on cbox (d image / d scale of the red
-//! wall's reflectance), reverse mode on cbox (dL/d red reflectance at 0.4
-//! grey, and dL/d the light's radiance at 10 grey), on bsdfs (dL/d ground reflectance at 0.3 grey, among rough
+//! Derivatives against Mitsuba 3's references (the project's reference
+//! kit, copied to scenes/refs; see scenes/README.md): forward mode on cbox
+//! (d image / d scale of the red wall's reflectance), reverse mode on cbox
+//! (dL/d red reflectance at 0.4 grey, and dL/d the light's radiance at 10
+//! grey), on bsdfs (dL/d ground reflectance at 0.3 grey, among rough
 //! BSDFs) and on textured (dL/d plane texture at 0.5); for media, forward
 //! mode on volume_homog against Mitsuba's finite differences (d image / d
 //! scale of the albedo and of σ_t) and reverse mode on volume_hetero (dL/d

@@ -2,13 +2,13 @@
 //! by emitters' radiances.
 //!
 //! Where the path tracer renders in lanes (`integrator/lanes.rs`: meshes
-//! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
-//! and every recorded parameter is read by the `diffuse` reflectances
-//! (plain values or textures) or by the plain radiances of `area` lights
-//! and `constant` environments alone (not by another BSDF, another
-//! emitter, a shape or the camera), with no emitters but these, the radiance of a path is a polynomial in its
-//! vertices' reflectances ρ_d that the lane loop can differentiate without
-//! a tape. With β_d the throughput reaching vertex d, E_d what is emitted
+//! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes),
+//! the scene's emitters are `area` lights and `constant` environments, and
+//! every recorded parameter is read by the `diffuse` reflectances (plain
+//! values or textures) or by those emitters' plain radiances alone (not by
+//! another BSDF, a shape or the camera), the radiance of a path is a
+//! polynomial in its vertices' reflectances ρ_d that the lane loop can
+//! differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
 //! environment's emission, MIS-weighted), N_d the light sample's
 //! contribution per unit of β_d ⊙ ρ_d, and s_d the roulette's factor on the
@@ -138,11 +138,11 @@ impl<'a> LaneAdjoint<'a> {
             let texture = match emitter {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
-                // scenes with other emitters keep the tape, as before
-                // radiances were taken: `check-grad` there compares reverse
-                // mode with the scalar loop's forward mode estimate for
-                // estimate (tests/check_grad.rs, whose scenes have point
-                // lights), and the loop in lanes draws other directions
+                // scenes with other emitters keep the tape: `check-grad`
+                // compares reverse mode there with the scalar loop's
+                // forward mode estimate for estimate (tests/check_grad.rs,
+                // whose scenes have point lights), and the loop in lanes
+                // draws other directions
                 _ => return None,
             };
             let ids = texture.param_ids()?;
