@@ -226,8 +226,8 @@ impl<'a> LaneAdjoint<'a> {
         };
         // per shape, the adjoints of a uniform reflectance over the tile
         let mut uniform = vec![DVec3::ZERO; scene.shapes.len()];
-        // per emitter, the adjoints of its radiance over the tile
-        let mut radiance = vec![DVec3::ZERO; scene.emitters.len()];
+        // per recorded radiance (`log.emitters`), its adjoints over the tile
+        let mut radiance = vec![DVec3::ZERO; log.emitters.len()];
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
         for y in tile.y0..tile.y0 + tile.h {
@@ -269,11 +269,10 @@ impl<'a> LaneAdjoint<'a> {
                             Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
                             Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
                         );
-                        for (&em, per_radiance) in log.emitters.iter().zip(&log.per_radiance) {
+                        for (sum, per_radiance) in radiance.iter_mut().zip(&log.per_radiance) {
                             // (a left-out lane's light may not be finite)
                             let g = V3::select(keep, delta.mul_elem(*per_radiance), V3::zero());
-                            radiance[em as usize] +=
-                                (0..N).map(|k| lane3(g, k).as_dvec3()).sum::<DVec3>();
+                            *sum += (0..N).map(|k| lane3(g, k).as_dvec3()).sum::<DVec3>();
                         }
                         log.sweep(delta, |vertex, k, hit, g| {
                             match self.reflectance[hit.shape as usize] {
@@ -313,22 +312,24 @@ impl<'a> LaneAdjoint<'a> {
             }
         }
         for (shape, g) in uniform.iter().enumerate() {
-            if let (Some(Reflectance::Uniform(texture)), false) =
-                (self.reflectance[shape], *g == DVec3::ZERO)
-            {
-                let si =
-                    surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, shape as u32, 0);
-                self.scatter(texture, &si, g.as_vec3(), sums);
+            if let Some(Reflectance::Uniform(texture)) = self.reflectance[shape] {
+                self.scatter_plain(texture, *g, sums);
             }
         }
-        for (texture, g) in self.radiance.iter().zip(&radiance) {
-            if let (Some(texture), false) = (texture, *g == DVec3::ZERO) {
-                // (a plain value, the same at any interaction)
-                let si = surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
-                self.scatter(texture, &si, g.as_vec3(), sums);
-            }
+        for (&em, g) in log.emitters.iter().zip(&radiance) {
+            let texture = self.radiance[em as usize].expect("a recorded radiance");
+            self.scatter_plain(texture, *g, sums);
         }
         non_finite
+    }
+
+    /// [`LaneAdjoint::scatter`] for a plain value (the same at any
+    /// interaction), the sum `g` of its adjoints over a tile.
+    fn scatter_plain(&self, texture: &Texture, g: DVec3, sums: &mut TileSums) {
+        if g != DVec3::ZERO {
+            let si = surface_si::<Var>(Vec3::ZERO, Vec3::Z, Vec2::ZERO, Vec3::Z, 0, 0);
+            self.scatter(texture, &si, g.as_vec3(), sums);
+        }
     }
 
     /// Adds to `sums` the gradient of `texture` at `si` for the adjoint
