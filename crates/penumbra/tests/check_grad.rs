@@ -213,6 +213,24 @@ fn surface_and_emitter_parameters() {
     }
 }
 
+/// A scene the path tracer renders in lanes (cbox: meshes, `diffuse`
+/// BSDFs, an area light), whose reverse mode by these parameters runs in
+/// lanes too: `check_gradient` puts its finite differences, forward and
+/// reverse mode on the one scalar loop, so that forward and reverse mode
+/// differentiate the same estimate (the loop in lanes estimates the image
+/// with other directions for the same random numbers).
+#[test]
+fn scenes_in_lanes_are_checked_on_one_loop() {
+    let defines = [
+        ("res".to_string(), "24".to_string()),
+        ("max_depth".to_string(), "4".to_string()),
+    ];
+    let mut scene = Scene::load_file(&repo().join("scenes/cbox.xml"), &defines).unwrap();
+    for key in ["red.reflectance.value", "light.emitter.radiance.value"] {
+        check(&mut scene, key);
+    }
+}
+
 /// A `pplastic` sphere (anisotropic roughness) and a rectangle (a
 /// textured diffuse reflectance) under an area light and a point light.
 fn pplastic_scene() -> Scene {

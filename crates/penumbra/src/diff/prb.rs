@@ -255,7 +255,7 @@ pub fn render_backward(
         let zeros = scene.params.iter().map(|(_, p)| vec![0.0; p.data.len()]);
         (zeros.collect(), 0)
     } else {
-        let lanes = LaneAdjoint::new(scene, &store, lane_width()?);
+        let lanes = LaneAdjoint::new(scene, &store, lane_width(opts.lanes)?);
         backward_pass(scene, &store, &d_image, opts, lanes.as_ref())?
     };
     if edges_move && terms.primary {

@@ -138,12 +138,12 @@ impl<'a> LaneAdjoint<'a> {
             let texture = match emitter {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
-                // scenes with other emitters keep the tape: `check-grad`
-                // compares reverse mode there with the scalar loop's
-                // forward mode estimate for estimate (tests/check_grad.rs,
-                // whose scenes have point lights), and the loop in lanes
-                // draws other directions
-                _ => return None,
+                // the loop samples other emitters by their own code: their
+                // parameters, not read here, take the tape
+                _ => {
+                    radiance.push(None);
+                    continue;
+                }
             };
             let ids = texture.param_ids()?;
             // the light of an emitter the loop reads as a plain value is
@@ -516,13 +516,26 @@ mod tests {
     use crate::scene::Scene;
     use std::path::Path;
 
+    /// A bundled scene; `cbox_point` is cbox with a point light `bulb`
+    /// beside its area light (an emitter the loop samples by its own code).
     fn scene(name: &str, res: u32, max_depth: u32) -> Scene {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.xml"));
+        let file = name.strip_suffix("_point").unwrap_or(name);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{file}.xml"));
         let defines = [
             ("res".to_string(), res.to_string()),
             ("max_depth".to_string(), max_depth.to_string()),
         ];
-        Scene::load_file(&path, &defines).unwrap()
+        if file == name {
+            return Scene::load_file(&path, &defines).unwrap();
+        }
+        let bulb = r#"<emitter type="point" id="bulb">
+            <point name="position" x="0.3" y="0.6" z="0.2"/>
+            <rgb name="intensity" value="1.5, 1.2, 0.9"/>
+        </emitter></scene>"#;
+        let xml = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("</scene>", bulb);
+        Scene::load_str(&xml, &path, &defines).unwrap()
     }
 
     fn opts(spp: u32, seed: u64) -> RenderOptions {
@@ -611,6 +624,11 @@ mod tests {
         assert!(takes("textured", "env.radiance.value"));
         assert!(takes("bsdfs", "ground.bsdf.reflectance.value"));
         assert!(takes("bsdfs", "light.emitter.radiance.value"));
+        // beside an emitter the loop samples by its own code, whose
+        // parameters take the tape
+        assert!(takes("cbox_point", "red.reflectance.value"));
+        assert!(takes("cbox_point", "light.emitter.radiance.value"));
+        assert!(!takes("cbox_point", "bulb.intensity.value"));
         assert!(!takes("cbox", "light.vertex_positions"));
         assert!(!takes("cbox", "sensor.x_fov"));
         for key in [
@@ -627,7 +645,8 @@ mod tests {
     /// The gradient in lanes is the derivative of the image in lanes with
     /// the same random numbers: for an adjoint image w, g · v against the
     /// central difference of Σ w · I(θ ± ε v), on cbox (a plain
-    /// reflectance, and the area light's radiance, each channel), textured
+    /// reflectance, and the area light's radiance, each channel; the
+    /// reflectance again with a point light beside the area light), textured
     /// (a texture, along a random direction over its texels, and the
     /// constant environment's radiance) and bsdfs (the diffuse ground's
     /// reflectance among rough BSDFs, and the area light's radiance). max_depth 5 keeps the roulette out
@@ -644,6 +663,7 @@ mod tests {
         for (name, key, directions) in [
             ("cbox", "red.reflectance.value", 3),
             ("cbox", "light.emitter.radiance.value", 3),
+            ("cbox_point", "red.reflectance.value", 3),
             ("textured", "plane.bsdf.reflectance.data", 1),
             ("textured", "env.radiance.value", 3),
             ("bsdfs", "ground.bsdf.reflectance.value", 3),
@@ -664,8 +684,12 @@ mod tests {
             let ids = [scene.params.require(key).unwrap()];
             let seeds = Seeds::recorded(&scene.params, &ids).unwrap();
             assert!(
-                LaneAdjoint::new(&scene, &scene.params.view(&seeds), lane_width().unwrap())
-                    .is_some(),
+                LaneAdjoint::new(
+                    &scene,
+                    &scene.params.view(&seeds),
+                    lane_width(None).unwrap()
+                )
+                .is_some(),
                 "{name}: not the reverse mode in lanes"
             );
             let g = render_backward(&scene, &w, Some(&[key]), &opts).unwrap();
@@ -717,7 +741,8 @@ mod tests {
 
     /// The reverse mode in lanes and the one on a tape estimate the same
     /// gradient at full depth, roulette included: the means of 16 runs each
-    /// (other seeds, 32 spp) of cbox's red reflectance and light radiance, of
+    /// (other seeds, 32 spp) of cbox's red reflectance (also with a point
+    /// light beside its area light) and light radiance, of
     /// bsdfs' ground reflectance and environment radiance and of the
     /// per-channel sum of textured's texture gradient differ by less than 4.5 standard
     /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased),
@@ -729,6 +754,7 @@ mod tests {
         for (name, key) in [
             ("cbox", "red.reflectance.value"),
             ("cbox", "light.emitter.radiance.value"),
+            ("cbox_point", "red.reflectance.value"),
             ("textured", "plane.bsdf.reflectance.data"),
             ("bsdfs", "ground.bsdf.reflectance.value"),
             ("bsdfs", "env.radiance.value"),

@@ -964,9 +964,11 @@ impl<'a> LanePath<'a> {
     }
 }
 
-/// How many lanes the path tracer in lanes runs: `PENUMBRA_LANES` where
-/// it is set (a development switch for measurements: 1 for the scalar
-/// loop, or 4, 8, 16 where the processor has them), else 4.
+/// How many lanes the path tracer in lanes runs: `requested` (a render's
+/// [`RenderOptions::lanes`](super::RenderOptions::lanes)), else
+/// `PENUMBRA_LANES` where it is set (a switch for checks and
+/// measurements), else 4; 1 is the scalar loop, 8 and 16 need a processor
+/// that has them.
 ///
 /// Four, not the widest the processor has: a block's lanes are one
 /// pixel's samples, and the block runs until its longest path ends, so
@@ -977,18 +979,20 @@ impl<'a> LanePath<'a> {
 /// Measured on an Intel Xeon with AVX-512 (docs/perf/lanes.md, "The
 /// width"): 4 lanes render cbox in 0.79 of the time of 16 and 0.92 of 8,
 /// textured in 0.86 of 16, mesh_heavy in 0.95.
-pub(crate) fn lane_width() -> Result<usize> {
+pub(crate) fn lane_width(requested: Option<usize>) -> Result<usize> {
     const DEFAULT: usize = 4;
     let widest = widest_lanes().max(DEFAULT);
-    let Ok(v) = std::env::var("PENUMBRA_LANES") else {
-        return Ok(DEFAULT);
+    let (width, source) = match (requested, std::env::var("PENUMBRA_LANES")) {
+        (Some(w), _) => (Ok(w), format!("lanes = {w}")),
+        (None, Ok(v)) => (v.trim().parse::<usize>(), format!("PENUMBRA_LANES={v}")),
+        (None, Err(_)) => return Ok(DEFAULT),
     };
-    match v.trim().parse::<usize>() {
+    match width {
         Ok(w @ (1 | 4)) => Ok(w),
         Ok(w @ (8 | 16)) if w <= widest => Ok(w),
         _ => Err(Error::Invalid(format!(
-            "PENUMBRA_LANES={v}: expected 1 (the scalar loop), 4 or a width this processor \
-             has (up to {widest})"
+            "{source}: expected 1 (the scalar loop), 4 or a width this processor has (up to \
+             {widest})"
         ))),
     }
 }

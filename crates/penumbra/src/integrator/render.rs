@@ -48,6 +48,13 @@ pub struct RenderOptions {
     /// Set from another thread to stop early; the render then fails with
     /// [`Error::Interrupted`].
     pub cancel: Option<Arc<AtomicBool>>,
+    /// Paths shaded at once by the path tracer in lanes: 1 for the scalar
+    /// loop, or 4, 8, 16 where the processor has them (default: the
+    /// environment variable `PENUMBRA_LANES`, else 4). Finite-difference
+    /// checks need 1: the loop in lanes estimates the same image with other
+    /// directions for the same random numbers, and derivatives that are
+    /// not in lanes replay the scalar loop.
+    pub lanes: Option<usize>,
 }
 
 /// A rendered image: `height × width × channels`, row-major, top row
@@ -85,7 +92,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<Rendered> {
         }
         names.insert(3.min(n), "A".into());
     }
-    let lanes = LanePath::new(scene, lane_width()?);
+    let lanes = LanePath::new(scene, lane_width(opts.lanes)?);
     let (block, non_finite_samples) = if let Some(lanes) = &lanes {
         render_tiles(scene, opts, names.len(), "render", |layout, tile, block| {
             lanes.render_tile(layout, tile, alpha, block)
