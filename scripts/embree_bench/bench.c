@@ -17,6 +17,10 @@
  *   REPS                   traces of all the rays, each timed, after one
  *                          untimed (warm-up)
  *   robust                 RTC_SCENE_FLAG_ROBUST (default: no scene flags)
+ * With PACKET=16 in the environment, each 16 consecutive rays are traced as
+ * one packet (rtcIntersect16 / rtcOccluded16: Embree's hybrid traversal,
+ * packets while their rays agree and single rays after, as Mitsuba's
+ * llvm variants call it 16 lanes wide).
  * The build uses Embree's default quality (RTC_BUILD_QUALITY_MEDIUM) and
  * THREADS build threads; it is timed apart. Writes the hits of the last
  * trace to DIR/embree_KIND_tTHREADS.bin (closest: per ray f32 t, inf on a
@@ -65,11 +69,44 @@ struct job {
     const float *rays; /* [n][8] */
     size_t n;
     int occluded;
+    int packets; /* PACKET=16: rays 16 at a time */
     atomic_size_t next;
     float *t;
     int32_t *geom, *prim;
     uint8_t *hit;
 };
+
+/* rays [start, end) in packets of 16 (the last one partly valid) */
+static void trace16(struct job *j, struct RTCIntersectContext *ctx, size_t start, size_t end) {
+    for (size_t i0 = start; i0 < end; i0 += 16) {
+        int valid[16];
+        struct RTCRayHit16 h;
+        memset(&h, 0, sizeof h);
+        for (int k = 0; k < 16; k++) {
+            valid[k] = i0 + k < end ? -1 : 0;
+            const float *r = j->rays + 8 * (valid[k] ? i0 + k : start);
+            h.ray.org_x[k] = r[0], h.ray.org_y[k] = r[1], h.ray.org_z[k] = r[2];
+            h.ray.dir_x[k] = r[3], h.ray.dir_y[k] = r[4], h.ray.dir_z[k] = r[5];
+            h.ray.tnear[k] = r[6], h.ray.tfar[k] = r[7];
+            h.ray.mask[k] = 0xffffffffu;
+            h.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+            h.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+        }
+        if (j->occluded) rtcOccluded16(valid, j->scene, ctx, &h.ray);
+        else rtcIntersect16(valid, j->scene, ctx, &h);
+        for (int k = 0; k < 16 && i0 + k < end; k++) {
+            size_t i = i0 + k;
+            if (j->occluded) {
+                j->hit[i] = h.ray.tfar[k] < 0.0f;
+                continue;
+            }
+            int miss = h.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID;
+            j->t[i] = miss ? INFINITY : h.ray.tfar[k];
+            j->geom[i] = miss ? -1 : (int32_t)h.hit.geomID[k];
+            j->prim[i] = miss ? -1 : (int32_t)h.hit.primID[k];
+        }
+    }
+}
 
 static void *worker(void *arg) {
     struct job *j = arg;
@@ -79,6 +116,10 @@ static void *worker(void *arg) {
         size_t start = atomic_fetch_add(&j->next, CHUNK);
         if (start >= j->n) break;
         size_t end = start + CHUNK < j->n ? start + CHUNK : j->n;
+        if (j->packets) {
+            trace16(j, &ctx, start, end);
+            continue;
+        }
         for (size_t i = start; i < end; i++) {
             const float *r = j->rays + 8 * i;
             if (j->occluded) {
@@ -160,6 +201,9 @@ int main(int argc, char **argv) {
     snprintf(path, sizeof path, "%s/rays_%s.bin", dir, kind);
     float *rays = read_file(path, &size);
     struct job j = {.scene = scene, .rays = rays, .n = size / 32, .occluded = occluded};
+    const char *packet = getenv("PACKET");
+    j.packets = packet && strcmp(packet, "16") == 0;
+    if (packet && !j.packets) die("PACKET: only 16 is supported");
     j.t = malloc(4 * j.n + 1), j.geom = malloc(4 * j.n + 1), j.prim = malloc(4 * j.n + 1);
     j.hit = malloc(j.n + 1);
     pthread_t *th = malloc(sizeof(pthread_t) * threads);
@@ -175,8 +219,8 @@ int main(int argc, char **argv) {
         for (int k = 1; k < threads; k++) pthread_join(th[k], NULL);
         if (r >= 0) printf("%s%.6f", r ? ", " : "", now() - s);
     }
-    printf("], \"embree\": \"%s\", \"robust\": %s}\n", RTC_VERSION_STRING,
-           robust ? "true" : "false");
+    printf("], \"embree\": \"%s\", \"robust\": %s, \"packet\": %d}\n", RTC_VERSION_STRING,
+           robust ? "true" : "false", j.packets ? 16 : 1);
 
     snprintf(path, sizeof path, "%s/embree_%s_t%d.bin", dir, kind, threads);
     FILE *out = fopen(path, "wb");

@@ -17,6 +17,11 @@
 //!   hands out chunks of as many rays from a counter); `REPS`: timed traces
 //!   (after one untimed warm-up trace).
 //!
+//! With `PACKET=16` in the environment, closest hits take each 16
+//! consecutive rays as one packet ([`Accel::intersect_packet`], SIMD over
+//! the rays, as the render loop traces a pixel's camera rays; the C
+//! program's `PACKET=16` is Embree's `rtcIntersect16`).
+//!
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
 //! `f32` t, `inf` on a miss, `i32` shape, `i32` triangle, −1 on a miss;
@@ -134,6 +139,11 @@ fn main() {
         })
         .collect();
 
+    let packets = match std::env::var("PACKET").as_deref() {
+        Err(_) => false,
+        Ok("16") if !occluded => true,
+        Ok(v) => fail(&format!("PACKET={v}: only 16, for closest hits")),
+    };
     // per ray: (t, shape, triangle) or occluded
     let mut hits = vec![(f32::INFINITY, -1i32, -1i32); rays.len()];
     let mut blocked = vec![false; rays.len()];
@@ -150,6 +160,24 @@ fn main() {
                     .for_each(|(out, rays)| {
                         for (o, r) in out.iter_mut().zip(rays) {
                             *o = accel.occluded(r);
+                        }
+                    });
+            } else if packets {
+                hits.par_chunks_mut(CHUNK)
+                    .zip(rays.par_chunks(CHUNK))
+                    .with_max_len(1)
+                    .for_each(|(out, rays)| {
+                        for (o, r) in out.chunks_mut(16).zip(rays.chunks(16)) {
+                            // a last, short packet repeats its first ray in
+                            // the lanes it leaves inactive
+                            let mut packet = [r[0]; 16];
+                            packet[..r.len()].copy_from_slice(r);
+                            let h = accel.intersect_packet(&packet, (1u32 << r.len()) - 1);
+                            for (o, h) in o.iter_mut().zip(h) {
+                                *o = h.map_or((f32::INFINITY, -1, -1), |h| {
+                                    (h.t, h.shape as i32, h.prim as i32)
+                                });
+                            }
                         }
                     });
             } else {

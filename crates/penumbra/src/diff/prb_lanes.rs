@@ -2,11 +2,11 @@
 //! by emitters' radiances.
 //!
 //! Where the path tracer renders in lanes (`integrator/lanes.rs`: meshes
-//! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes),
-//! the scene's emitters are `area` lights and `constant` environments, and
-//! every recorded parameter is read by the `diffuse` reflectances (plain
-//! values or textures) or by those emitters' plain radiances alone (not by
-//! another BSDF, a shape or the camera), the radiance of a path is a
+//! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
+//! and every recorded parameter is read by the `diffuse` reflectances
+//! (plain values or textures) or by the plain radiances of `area` lights
+//! and `constant` environments alone (not by another BSDF or emitter, a
+//! shape or the camera), the radiance of a path is a
 //! polynomial in its vertices' reflectances ρ_d that the lane loop can
 //! differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
