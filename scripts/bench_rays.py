@@ -73,6 +73,8 @@ import time
 
 import numpy as np
 
+from textured_rays import read_ply
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "scenes", "mesh_heavy.xml")
 PLY = os.path.join(ROOT, "scenes", "meshes", "displaced_sphere.ply")
@@ -81,23 +83,6 @@ KINDS = (("primary", "closest"), ("bounce", "closest"), ("shadow", "occluded"))
 SHAPES = ("ground", "blob", "light")  # Penumbra's shape order in the scene
 # hits as the three programs write them (bench.c, trace_rays.rs, worker())
 CLOSEST = np.dtype([("t", "<f4"), ("shape", "<i4"), ("prim", "<i4")])
-
-
-def read_ply_faces(path):
-    """Faces of the binary little-endian PLY the scene uses (triangles,
-    `list uchar int`)."""
-    with open(path, "rb") as f:
-        header = b""
-        while not header.endswith(b"end_header\n"):
-            header += f.readline()
-        lines = header.decode().splitlines()
-        n_vert = int(next(l for l in lines if l.startswith("element vertex")).split()[2])
-        n_face = int(next(l for l in lines if l.startswith("element face")).split()[2])
-        f.seek(n_vert * 12, 1)
-        rec = np.dtype([("n", "u1"), ("i", "<i4", 3)])
-        faces = np.frombuffer(f.read(n_face * rec.itemsize), dtype=rec)
-    assert np.all(faces["n"] == 3), "triangles only"
-    return faces["i"]
 
 
 def make_rays(scene, params, res, seed=7):
@@ -145,7 +130,7 @@ def write_inputs(folder, res):
         f.write(np.uint32(len(SHAPES)).tobytes())
         for key in SHAPES:
             v = np.ascontiguousarray(params[f"{key}.vertex_positions"], dtype="<f4").reshape(-1, 3)
-            faces = read_ply_faces(PLY) if key == "blob" else np.array([[0, 1, 2], [0, 2, 3]])
+            faces = read_ply(PLY)[1] if key == "blob" else np.array([[0, 1, 2], [0, 2, 3]])
             faces = np.ascontiguousarray(faces, dtype="<u4")
             f.write(np.array([len(v), len(faces)], dtype="<u4").tobytes() + v.tobytes() + faces.tobytes())
             tris += len(faces)
