@@ -9,6 +9,8 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
                        a diffuse ground among rough conductor, dielectric
                        and plastic spheres)
        grad_rev_light  reverse mode, dL2/d light.emitter.radiance (cbox, 10 grey)
+       grad_rev_point  reverse mode, dL2/d bulb.intensity (cbox_point: cbox with
+                       a point light beside its area light; 2 grey)
        grad_fwd_albedo forward mode, d image / d scale of red.reflectance
        vol_hetero_rev  reverse mode, dL2/d density grid (volume_hetero, 0.3,
                        32 spp; Mitsuba's prbvolpath), with --jobs
@@ -25,8 +27,8 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
      should not grow with depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
-      [--jobs grad_rev_bsdf grad_rev_tex grad_rev_mixed grad_rev_light grad_fwd_albedo
-              vol_hetero_rev]
+      [--jobs grad_rev_bsdf grad_rev_tex grad_rev_mixed grad_rev_light grad_rev_point
+              grad_fwd_albedo vol_hetero_rev]
       [--memory cbox|volume_hetero] [--rounds 3] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
 --rounds R (default 3) measures each job's warm times R times, Penumbra and
@@ -91,7 +93,7 @@ def main():
                     help='warm times measured this many times per side, the sides alternating')
     ap.add_argument('--jobs', nargs='+',
                     default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_rev_mixed', 'grad_rev_light',
-                             'grad_fwd_albedo'])
+                             'grad_rev_point', 'grad_fwd_albedo'])
     ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
@@ -121,6 +123,10 @@ def main():
         'grad_rev_light': ['scenes/cbox.xml', '-D', 'res=128', '--param',
                            'light.emitter.radiance.value', '--init', '10', '--target',
                            'scenes/refs/cbox_target128.exr', '--spp', '64', '--reps', r,
+                           '-o', 'out/bench_grad'],
+        'grad_rev_point': ['scenes/cbox_point.xml', '-D', 'res=128', '--param',
+                           'bulb.intensity.value', '--init', '2', '--target',
+                           'scenes/refs/cbox_point_target128.exr', '--spp', '64', '--reps', r,
                            '-o', 'out/bench_grad'],
         'grad_fwd_albedo': ['scenes/cbox.xml', '-D', 'res=128', '--param', 'red.reflectance.value',
                             '--mode', 'forward', '--spp', '64', '--reps', r, '-o', 'out/bench_grad'],

@@ -17,6 +17,7 @@ Tasks (see README.md for the exact definition of each):
   grad_rev_tex  reverse-mode dL2/d(plane texture) on textured with prb
   grad_rev_mixed reverse-mode dL2/d(ground.reflectance) on bsdfs (mixed BSDFs), prb
   grad_rev_light reverse-mode dL2/d(light.emitter.radiance) on cbox with prb
+  grad_rev_point reverse-mode dL2/d(bulb.intensity) on cbox_point with prb
   grad_fwd_albedo forward-mode d image / d(scale of red.reflectance) on cbox, prb
   grad_geom_fwd forward-mode d image / d(x-translation of mesh 'obj') on geom,
                 --integrator prb | direct_projective | prb_projective |
@@ -207,6 +208,13 @@ def task_grad_rev_light(a):
     on cbox, the area light's radiance set to 10 grey."""
     return _reverse_color(a, 'cbox', 'light.emitter.radiance.value', 10.0,
                           [18.387, 13.9873, 6.7536])
+
+
+def task_grad_rev_point(a):
+    """Reverse mode by a point light's intensity: dL2/d(bulb.intensity) on
+    cbox_point (cbox with a point light beside its area light), set to 2
+    grey."""
+    return _reverse_color(a, 'cbox_point', 'bulb.intensity.value', 2.0, [1.5, 1.2, 0.9])
 
 
 def task_grad_rev_tex(a):

@@ -4,9 +4,9 @@
 //! Where the path tracer renders in lanes (`integrator/lanes.rs`: meshes
 //! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
 //! and every recorded parameter is read by the `diffuse` reflectances
-//! (plain values or textures) or by the plain radiances of `area` lights
-//! and `constant` environments alone (not by another BSDF or emitter, a
-//! shape or the camera), the radiance of a path is a
+//! (plain values or textures) or by the plain radiances of `area` lights,
+//! `constant` environments and `point` lights alone (not by another BSDF
+//! or emitter, a shape or the camera), the radiance of a path is a
 //! polynomial in its vertices' reflectances ρ_d that the lane loop can
 //! differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
@@ -138,6 +138,7 @@ impl<'a> LaneAdjoint<'a> {
             let texture = match emitter {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
+                Emitter::Point(point) => &point.intensity,
                 // the loop samples other emitters by their own code: their
                 // parameters, not read here, take the tape
                 _ => {
@@ -516,26 +517,13 @@ mod tests {
     use crate::scene::Scene;
     use std::path::Path;
 
-    /// A bundled scene; `cbox_point` is cbox with a point light `bulb`
-    /// beside its area light (an emitter the loop samples by its own code).
     fn scene(name: &str, res: u32, max_depth: u32) -> Scene {
-        let file = name.strip_suffix("_point").unwrap_or(name);
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{file}.xml"));
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.xml"));
         let defines = [
             ("res".to_string(), res.to_string()),
             ("max_depth".to_string(), max_depth.to_string()),
         ];
-        if file == name {
-            return Scene::load_file(&path, &defines).unwrap();
-        }
-        let bulb = r#"<emitter type="point" id="bulb">
-            <point name="position" x="0.3" y="0.6" z="0.2"/>
-            <rgb name="intensity" value="1.5, 1.2, 0.9"/>
-        </emitter></scene>"#;
-        let xml = std::fs::read_to_string(&path)
-            .unwrap()
-            .replace("</scene>", bulb);
-        Scene::load_str(&xml, &path, &defines).unwrap()
+        Scene::load_file(&path, &defines).unwrap()
     }
 
     fn opts(spp: u32, seed: u64) -> RenderOptions {
@@ -628,7 +616,8 @@ mod tests {
         // parameters take the tape
         assert!(takes("cbox_point", "red.reflectance.value"));
         assert!(takes("cbox_point", "light.emitter.radiance.value"));
-        assert!(!takes("cbox_point", "bulb.intensity.value"));
+        assert!(takes("cbox_point", "bulb.intensity.value"));
+        assert!(!takes("cbox_point", "bulb.position"));
         assert!(!takes("cbox", "light.vertex_positions"));
         assert!(!takes("cbox", "sensor.x_fov"));
         for key in [
@@ -664,6 +653,7 @@ mod tests {
             ("cbox", "red.reflectance.value", 3),
             ("cbox", "light.emitter.radiance.value", 3),
             ("cbox_point", "red.reflectance.value", 3),
+            ("cbox_point", "bulb.intensity.value", 3),
             ("textured", "plane.bsdf.reflectance.data", 1),
             ("textured", "env.radiance.value", 3),
             ("bsdfs", "ground.bsdf.reflectance.value", 3),
@@ -755,6 +745,7 @@ mod tests {
             ("cbox", "red.reflectance.value"),
             ("cbox", "light.emitter.radiance.value"),
             ("cbox_point", "red.reflectance.value"),
+            ("cbox_point", "bulb.intensity.value"),
             ("textured", "plane.bsdf.reflectance.data"),
             ("bsdfs", "ground.bsdf.reflectance.value"),
             ("bsdfs", "env.radiance.value"),

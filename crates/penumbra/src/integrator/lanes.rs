@@ -6,7 +6,8 @@
 //! processor has AVX2 or AVX-512 and they are asked for
 //! (docs/perf/lanes.md). Emission and light sampling of `area`
 //! emitters on meshes (a plain radiance) are in lanes too, and light
-//! samples of a `constant` environment of plain radiance are drawn here.
+//! samples of a `constant` environment of plain radiance and of a `point`
+//! light of plain intensity are drawn here.
 //! A pixel's camera rays, up to [`PACKET`] of them, are traced together
 //! as one packet before their samples are shaded `N` at a time; the
 //! bounce and shadow rays' traversal, the other emitters' sampling and
@@ -176,6 +177,9 @@ enum LaneLight<'a> {
     /// probability `pick`: a direction, its density and weight without
     /// an emitter sample (the values of [`Scene::sample_emitter`]).
     Constant { radiance: Vec3, pick: f32 },
+    /// A `point` light of plain intensity at `position`: its sample (a
+    /// delta) drawn in the loop, with the `point` emitter's arithmetic.
+    Point { position: Vec3, intensity: Vec3 },
     /// Any other emitter: its own code, lane by lane.
     Other,
 }
@@ -401,6 +405,13 @@ impl<'a> LanePath<'a> {
                     },
                     Err(_) => LaneLight::Other,
                 },
+                Emitter::Point(point) => match value(&point.intensity) {
+                    Ok(intensity) => LaneLight::Point {
+                        position: store.read3::<f32>(point.position, 0).val(),
+                        intensity,
+                    },
+                    Err(_) => LaneLight::Other,
+                },
                 _ => LaneLight::Other,
             })
             .collect();
@@ -432,9 +443,9 @@ impl<'a> LanePath<'a> {
     }
 
     /// Whether the loop reads emitter `emitter`'s radiance as a plain
-    /// value (an `area` light's on a mesh, a `constant` environment's):
-    /// the light it sends is then linear in that value
-    /// ([`PathLog::light`]).
+    /// value (an `area` light's on a mesh, a `constant` environment's, a
+    /// `point` light's intensity): the light it sends is then linear in
+    /// that value ([`PathLog::light`]).
     pub(crate) fn plain_radiance(&self, emitter: u32) -> bool {
         !matches!(self.lights[emitter as usize], LaneLight::Other)
     }
@@ -768,7 +779,7 @@ impl<'a> LanePath<'a> {
                         continue;
                     }
                     let u = rngs[k].next_2d();
-                    let (em, _, ux) = dist.sample_reuse(u.x);
+                    let (em, em_pick, ux) = dist.sample_reuse(u.x);
                     match self.lights[em] {
                         LaneLight::Mesh(light) => {
                             let (_, _, p, n) =
@@ -784,6 +795,23 @@ impl<'a> LanePath<'a> {
                             (o_d[k], o_pdf[k]) = (d, pdf * pick);
                             o_w[k] = radiance * (1.0 / pdf) * (1.0 / pick);
                             (o_far[k], o_end[k]) = (true, d);
+                        }
+                        // as `point_light_sample` and `Scene::sample_emitter`
+                        LaneLight::Point {
+                            position,
+                            intensity,
+                        } => {
+                            let to = position - lane3(p, k);
+                            let dist2 = to.length_squared();
+                            if dist2 > 0.0 {
+                                y_em[k] = Some(em as u32);
+                                other[k] = true;
+                                // (`V3`'s division multiplies by the reciprocal)
+                                (o_d[k], o_pdf[k]) = (to * dist2.sqrt().recip(), em_pick);
+                                o_w[k] = intensity * dist2.recip() * (1.0 / em_pick);
+                                o_delta[k] = true;
+                                (o_far[k], o_end[k]) = (false, position);
+                            }
                         }
                         LaneLight::Other => {
                             let at = V3::cst(lane3(p, k));
@@ -843,9 +871,17 @@ impl<'a> LanePath<'a> {
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
                 // a plain radiance's sample weighs it by one over the
-                // sample's density
+                // sample's density, a point light's intensity by one over
+                // its pick's probability and the squared distance
                 log.light(throughput, || {
-                    (y_em, V3::select(visible, f * (w / pdf_em), V3::zero()))
+                    let per_unit =
+                        Lanes::<N>::from_fn(|k| match y_em[k].map(|em| self.lights[em as usize]) {
+                            Some(LaneLight::Point { position, .. }) => {
+                                w.0[k] / (o_pdf[k] * (position - lane3(p, k)).length_squared())
+                            }
+                            _ => w.0[k] / pdf_em.0[k],
+                        });
+                    (y_em, V3::select(visible, f * per_unit, V3::zero()))
                 });
                 log.next_event(depth, || {
                     // `lambert_eval` is a diffuse vertex's reflectance
