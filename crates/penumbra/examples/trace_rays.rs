@@ -17,10 +17,10 @@
 //!   hands out chunks of as many rays from a counter); `REPS`: timed traces
 //!   (after one untimed warm-up trace).
 //!
-//! With `PACKET=16` in the environment, closest hits take each 16
-//! consecutive rays as one packet ([`Accel::intersect_packet`], SIMD over
-//! the rays, as the render loop traces a pixel's camera rays; the C
-//! program's `PACKET=16` is Embree's `rtcIntersect16`).
+//! With `PACKET=P` (4, 8 or 16) in the environment, closest hits take
+//! each `P` consecutive rays as one packet ([`Accel::intersect_packet`],
+//! SIMD over the rays, as the render loop traces a pixel's camera rays;
+//! the C program's `PACKET=16` is Embree's `rtcIntersect16`).
 //!
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
@@ -139,10 +139,10 @@ fn main() {
         })
         .collect();
 
-    let packets = match std::env::var("PACKET").as_deref() {
-        Err(_) => false,
-        Ok("16") if !occluded => true,
-        Ok(v) => fail(&format!("PACKET={v}: only 16, for closest hits")),
+    let packet = match std::env::var("PACKET").as_deref() {
+        Err(_) => 1,
+        Ok(v @ ("4" | "8" | "16")) if !occluded => v.parse().unwrap(),
+        Ok(v) => fail(&format!("PACKET={v}: 4, 8 or 16, for closest hits")),
     };
     // per ray: (t, shape, triangle) or occluded
     let mut hits = vec![(f32::INFINITY, -1i32, -1i32); rays.len()];
@@ -162,24 +162,12 @@ fn main() {
                             *o = accel.occluded(r);
                         }
                     });
-            } else if packets {
-                hits.par_chunks_mut(CHUNK)
-                    .zip(rays.par_chunks(CHUNK))
-                    .with_max_len(1)
-                    .for_each(|(out, rays)| {
-                        for (o, r) in out.chunks_mut(16).zip(rays.chunks(16)) {
-                            // a last, short packet repeats its first ray in
-                            // the lanes it leaves inactive
-                            let mut packet = [r[0]; 16];
-                            packet[..r.len()].copy_from_slice(r);
-                            let h = accel.intersect_packet(&packet, (1u32 << r.len()) - 1);
-                            for (o, h) in o.iter_mut().zip(h) {
-                                *o = h.map_or((f32::INFINITY, -1, -1), |h| {
-                                    (h.t, h.shape as i32, h.prim as i32)
-                                });
-                            }
-                        }
-                    });
+            } else if packet == 16 {
+                trace_packets::<16>(&accel, &mut hits, &rays);
+            } else if packet == 8 {
+                trace_packets::<8>(&accel, &mut hits, &rays);
+            } else if packet == 4 {
+                trace_packets::<4>(&accel, &mut hits, &rays);
             } else {
                 hits.par_chunks_mut(CHUNK)
                     .zip(rays.par_chunks(CHUNK))
@@ -229,4 +217,27 @@ fn main() {
         st.sah_nodes,
         st.sah_leaves,
     );
+}
+
+/// The closest hits of `rays`, `P` consecutive rays at a time as one
+/// packet ([`Accel::intersect_packet`]), in chunks of [`CHUNK`] rays on
+/// rayon's threads.
+fn trace_packets<const P: usize>(accel: &Accel, hits: &mut [(f32, i32, i32)], rays: &[Ray]) {
+    hits.par_chunks_mut(CHUNK)
+        .zip(rays.par_chunks(CHUNK))
+        .with_max_len(1)
+        .for_each(|(out, rays)| {
+            for (o, r) in out.chunks_mut(P).zip(rays.chunks(P)) {
+                // a last, short packet repeats its first ray in the lanes
+                // it leaves inactive
+                let mut packet = [r[0]; P];
+                packet[..r.len()].copy_from_slice(r);
+                let h = accel.intersect_packet(&packet, (1u32 << r.len()) - 1);
+                for (o, h) in o.iter_mut().zip(h) {
+                    *o = h.map_or((f32::INFINITY, -1, -1), |h| {
+                        (h.t, h.shape as i32, h.prim as i32)
+                    });
+                }
+            }
+        });
 }
