@@ -5,8 +5,9 @@
 //! and spheres with `diffuse` BSDFs and the rough BSDFs written for lanes)
 //! and every recorded parameter is read by the `diffuse` reflectances
 //! (plain values or textures) or by the plain radiances of `area` lights,
-//! `constant` environments and `point` lights alone (not by another BSDF
-//! or emitter, a shape or the camera), the radiance of a path is a
+//! `constant` environments, `point` and `directional` lights alone (not
+//! by another BSDF or emitter, a shape or the camera), the radiance of a
+//! path is a
 //! polynomial in its vertices' reflectances ρ_d that the lane loop can
 //! differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
@@ -139,6 +140,7 @@ impl<'a> LaneAdjoint<'a> {
                 Emitter::Area(area) => &area.radiance,
                 Emitter::Constant(constant) => &constant.radiance,
                 Emitter::Point(point) => &point.intensity,
+                Emitter::Directional(directional) => &directional.irradiance,
                 // the loop samples other emitters by their own code: their
                 // parameters, not read here, take the tape
                 _ => {
@@ -517,13 +519,26 @@ mod tests {
     use crate::scene::Scene;
     use std::path::Path;
 
+    /// A bundled scene; `textured_sun` is textured with a directional
+    /// light `sun` beside its area light and environment.
     fn scene(name: &str, res: u32, max_depth: u32) -> Scene {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.xml"));
+        let file = name.strip_suffix("_sun").unwrap_or(name);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{file}.xml"));
         let defines = [
             ("res".to_string(), res.to_string()),
             ("max_depth".to_string(), max_depth.to_string()),
         ];
-        Scene::load_file(&path, &defines).unwrap()
+        if file == name {
+            return Scene::load_file(&path, &defines).unwrap();
+        }
+        let sun = r#"<emitter type="directional" id="sun">
+            <vector name="direction" x="0.3" y="-1" z="-0.4"/>
+            <rgb name="irradiance" value="2, 1.8, 1.5"/>
+        </emitter></scene>"#;
+        let xml = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("</scene>", sun);
+        Scene::load_str(&xml, &path, &defines).unwrap()
     }
 
     fn opts(spp: u32, seed: u64) -> RenderOptions {
@@ -617,6 +632,8 @@ mod tests {
         assert!(takes("cbox_point", "red.reflectance.value"));
         assert!(takes("cbox_point", "light.emitter.radiance.value"));
         assert!(takes("cbox_point", "bulb.intensity.value"));
+        assert!(takes("textured_sun", "sun.irradiance.value"));
+        assert!(takes("textured_sun", "plane.bsdf.reflectance.data"));
         assert!(!takes("cbox_point", "bulb.position"));
         assert!(!takes("cbox", "light.vertex_positions"));
         assert!(!takes("cbox", "sensor.x_fov"));
@@ -635,9 +652,10 @@ mod tests {
     /// the same random numbers: for an adjoint image w, g · v against the
     /// central difference of Σ w · I(θ ± ε v), on cbox (a plain
     /// reflectance, and the area light's radiance, each channel; the
-    /// reflectance again with a point light beside the area light), textured
-    /// (a texture, along a random direction over its texels, and the
-    /// constant environment's radiance) and bsdfs (the diffuse ground's
+    /// reflectance and the point light's intensity in cbox_point), textured
+    /// (a texture, along a random direction over its texels, the constant
+    /// environment's radiance, and a directional light's irradiance added
+    /// to it) and bsdfs (the diffuse ground's
     /// reflectance among rough BSDFs, and the area light's radiance). max_depth 5 keeps the roulette out
     /// (its survival probability is held fixed by the gradient, not by a
     /// finite difference). The image is a polynomial in θ, so the
@@ -654,6 +672,7 @@ mod tests {
             ("cbox", "light.emitter.radiance.value", 3),
             ("cbox_point", "red.reflectance.value", 3),
             ("cbox_point", "bulb.intensity.value", 3),
+            ("textured_sun", "sun.irradiance.value", 3),
             ("textured", "plane.bsdf.reflectance.data", 1),
             ("textured", "env.radiance.value", 3),
             ("bsdfs", "ground.bsdf.reflectance.value", 3),
@@ -732,7 +751,9 @@ mod tests {
     /// The reverse mode in lanes and the one on a tape estimate the same
     /// gradient at full depth, roulette included: the means of 16 runs each
     /// (other seeds, 32 spp) of cbox's red reflectance (also with a point
-    /// light beside its area light) and light radiance, of
+    /// light beside its area light) and light radiance, of the point
+    /// light's intensity, of a directional light's irradiance added to
+    /// textured, of
     /// bsdfs' ground reflectance and environment radiance and of the
     /// per-channel sum of textured's texture gradient differ by less than 4.5 standard
     /// errors (Welch; a chance of ~10⁻⁴ per number if both are unbiased),
@@ -746,6 +767,7 @@ mod tests {
             ("cbox", "light.emitter.radiance.value"),
             ("cbox_point", "red.reflectance.value"),
             ("cbox_point", "bulb.intensity.value"),
+            ("textured_sun", "sun.irradiance.value"),
             ("textured", "plane.bsdf.reflectance.data"),
             ("bsdfs", "ground.bsdf.reflectance.value"),
             ("bsdfs", "env.radiance.value"),

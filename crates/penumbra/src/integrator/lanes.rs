@@ -6,8 +6,9 @@
 //! processor has AVX2 or AVX-512 and they are asked for
 //! (docs/perf/lanes.md). Emission and light sampling of `area`
 //! emitters on meshes (a plain radiance) are in lanes too, and light
-//! samples of a `constant` environment of plain radiance and of a `point`
-//! light of plain intensity are drawn here.
+//! samples of a `constant` environment of plain radiance, of a `point`
+//! light of plain intensity and of a `directional` light of plain
+//! irradiance are drawn here.
 //! A pixel's camera rays, up to [`PACKET`] of them, are traced together
 //! as one packet before their samples are shaded `N` at a time; the
 //! bounce and shadow rays' traversal, the other emitters' sampling and
@@ -180,6 +181,9 @@ enum LaneLight<'a> {
     /// A `point` light of plain intensity at `position`: its sample (a
     /// delta) drawn in the loop, with the `point` emitter's arithmetic.
     Point { position: Vec3, intensity: Vec3 },
+    /// A `directional` light of plain irradiance, arriving from
+    /// `towards`: its sample (a delta at infinity) drawn in the loop.
+    Directional { towards: Vec3, irradiance: Vec3 },
     /// Any other emitter: its own code, lane by lane.
     Other,
 }
@@ -412,6 +416,13 @@ impl<'a> LanePath<'a> {
                     },
                     Err(_) => LaneLight::Other,
                 },
+                Emitter::Directional(directional) => match value(&directional.irradiance) {
+                    Ok(irradiance) => LaneLight::Directional {
+                        towards: -directional.direction,
+                        irradiance,
+                    },
+                    Err(_) => LaneLight::Other,
+                },
                 _ => LaneLight::Other,
             })
             .collect();
@@ -444,8 +455,8 @@ impl<'a> LanePath<'a> {
 
     /// Whether the loop reads emitter `emitter`'s radiance as a plain
     /// value (an `area` light's on a mesh, a `constant` environment's, a
-    /// `point` light's intensity): the light it sends is then linear in
-    /// that value ([`PathLog::light`]).
+    /// `point` light's intensity, a `directional` light's irradiance): the
+    /// light it sends is then linear in that value ([`PathLog::light`]).
     pub(crate) fn plain_radiance(&self, emitter: u32) -> bool {
         !matches!(self.lights[emitter as usize], LaneLight::Other)
     }
@@ -812,6 +823,19 @@ impl<'a> LanePath<'a> {
                                 o_delta[k] = true;
                                 (o_far[k], o_end[k]) = (false, position);
                             }
+                        }
+                        // as `Directional::sample_direction` and
+                        // `Scene::sample_emitter`
+                        LaneLight::Directional {
+                            towards,
+                            irradiance,
+                        } => {
+                            y_em[k] = Some(em as u32);
+                            other[k] = true;
+                            (o_d[k], o_pdf[k]) = (towards, em_pick);
+                            o_w[k] = irradiance * (1.0 / em_pick);
+                            o_delta[k] = true;
+                            (o_far[k], o_end[k]) = (true, towards);
                         }
                         LaneLight::Other => {
                             let at = V3::cst(lane3(p, k));
