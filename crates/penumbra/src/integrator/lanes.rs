@@ -895,8 +895,9 @@ impl<'a> LanePath<'a> {
                 let c = throughput.mul_elem(f).mul_elem(weight) * w;
                 result += V3::select(visible, c, V3::zero());
                 // a plain radiance's sample weighs it by one over the
-                // sample's density, a point light's intensity by one over
-                // its pick's probability and the squared distance
+                // sample's density (a directional light's irradiance: over
+                // its pick's probability), a point light's intensity by
+                // one over its pick's probability and the squared distance
                 log.light(throughput, || {
                     let per_unit =
                         Lanes::<N>::from_fn(|k| match y_em[k].map(|em| self.lights[em as usize]) {
