@@ -7,9 +7,8 @@
 //! (plain values or textures) or by the plain radiances of `area` lights,
 //! `constant` environments, `point` and `directional` lights alone (not
 //! by another BSDF or emitter, a shape or the camera), the radiance of a
-//! path is a
-//! polynomial in its vertices' reflectances ρ_d that the lane loop can
-//! differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
+//! path is a polynomial in its vertices' reflectances ρ_d that the lane
+//! loop can differentiate without a tape. With β_d the throughput reaching vertex d, E_d what is emitted
 //! towards the camera there per unit of β_d (a surface's or the
 //! environment's emission, MIS-weighted), N_d the light sample's
 //! contribution per unit of β_d ⊙ ρ_d, and s_d the roulette's factor on the
@@ -627,8 +626,8 @@ mod tests {
         assert!(takes("textured", "env.radiance.value"));
         assert!(takes("bsdfs", "ground.bsdf.reflectance.value"));
         assert!(takes("bsdfs", "light.emitter.radiance.value"));
-        // beside an emitter the loop samples by its own code, whose
-        // parameters take the tape
+        // beside point and directional lights, and by their plain values
+        // (a point light's position moves shadows: the tape)
         assert!(takes("cbox_point", "red.reflectance.value"));
         assert!(takes("cbox_point", "light.emitter.radiance.value"));
         assert!(takes("cbox_point", "bulb.intensity.value"));

@@ -35,7 +35,7 @@ use crate::ad::lanes::{each_lane, lane3, lanes3, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::bsdf::lambert_eval;
 use crate::bsdf::lanes::{BsdfLanes, LaneBsdf};
-use crate::emitter::{surface_si, Constant, Emitter, EmitterT};
+use crate::emitter::{point_light_sample, surface_si, Constant, Emitter, EmitterT};
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
@@ -807,18 +807,19 @@ impl<'a> LanePath<'a> {
                             o_w[k] = radiance * (1.0 / pdf) * (1.0 / pick);
                             (o_far[k], o_end[k]) = (true, d);
                         }
-                        // as `point_light_sample` and `Scene::sample_emitter`
+                        // the `point` emitter's sample, weighted as
+                        // `Scene::sample_emitter` weighs it
                         LaneLight::Point {
                             position,
                             intensity,
                         } => {
-                            let to = position - lane3(p, k);
-                            let dist2 = to.length_squared();
-                            if dist2 > 0.0 {
+                            let at = V3::cst(lane3(p, k));
+                            if let Some((ds, d, dist2)) =
+                                point_light_sample::<f32>(V3::cst(position), at)
+                            {
                                 y_em[k] = Some(em as u32);
                                 other[k] = true;
-                                // (`V3`'s division multiplies by the reciprocal)
-                                (o_d[k], o_pdf[k]) = (to * dist2.sqrt().recip(), em_pick);
+                                (o_d[k], o_pdf[k]) = (d.val(), ds.pdf * em_pick);
                                 o_w[k] = intensity * dist2.recip() * (1.0 / em_pick);
                                 o_delta[k] = true;
                                 (o_far[k], o_end[k]) = (false, position);
