@@ -17,10 +17,11 @@
 //!   hands out chunks of as many rays from a counter); `REPS`: timed traces
 //!   (after one untimed warm-up trace).
 //!
-//! With `PACKET=P` (4, 8 or 16) in the environment, closest hits take
-//! each `P` consecutive rays as one packet ([`Accel::intersect_packet`],
-//! SIMD over the rays, as the render loop traces a pixel's camera rays;
-//! the C program's `PACKET=16` is Embree's `rtcIntersect16`).
+//! With `PACKET=P` (4, 8 or 16) in the environment, each `P` consecutive
+//! rays go as one packet ([`Accel::intersect_packet`],
+//! [`Accel::occluded_packet`]: SIMD over the rays, as the render loop
+//! traces a pixel's camera rays and shadow rays; the C program's
+//! `PACKET=16` is Embree's `rtcIntersect16` and `rtcOccluded16`).
 //!
 //! The tree is built once, untimed (its time is reported). Writes the hits
 //! of the last trace to `DIR/penumbra_KIND_tTHREADS.bin` (closest: per ray
@@ -141,8 +142,8 @@ fn main() {
 
     let packet = match std::env::var("PACKET").as_deref() {
         Err(_) => 1,
-        Ok(v @ ("4" | "8" | "16")) if !occluded => v.parse().unwrap(),
-        Ok(v) => fail(&format!("PACKET={v}: 4, 8 or 16, for closest hits")),
+        Ok(v @ ("4" | "8" | "16")) => v.parse().unwrap(),
+        Ok(v) => fail(&format!("PACKET={v}: 4, 8 or 16")),
     };
     // per ray: (t, shape, triangle) or occluded
     let mut hits = vec![(f32::INFINITY, -1i32, -1i32); rays.len()];
@@ -152,7 +153,13 @@ fn main() {
     for rep in 0..=reps {
         let t = Instant::now();
         pool.install(|| {
-            if occluded {
+            if occluded && packet == 16 {
+                test_packets::<16>(&accel, &mut blocked, &rays);
+            } else if occluded && packet == 8 {
+                test_packets::<8>(&accel, &mut blocked, &rays);
+            } else if occluded && packet == 4 {
+                test_packets::<4>(&accel, &mut blocked, &rays);
+            } else if occluded {
                 blocked
                     .par_chunks_mut(CHUNK)
                     .zip(rays.par_chunks(CHUNK))
@@ -237,6 +244,26 @@ fn trace_packets<const P: usize>(accel: &Accel, hits: &mut [(f32, i32, i32)], ra
                     *o = h.map_or((f32::INFINITY, -1, -1), |h| {
                         (h.t, h.shape as i32, h.prim as i32)
                     });
+                }
+            }
+        });
+}
+
+/// Which of `rays` are blocked, `P` consecutive rays at a time as one
+/// packet ([`Accel::occluded_packet`]), in chunks of [`CHUNK`] rays on
+/// rayon's threads.
+fn test_packets<const P: usize>(accel: &Accel, blocked: &mut [bool], rays: &[Ray]) {
+    blocked
+        .par_chunks_mut(CHUNK)
+        .zip(rays.par_chunks(CHUNK))
+        .with_max_len(1)
+        .for_each(|(out, rays)| {
+            for (o, r) in out.chunks_mut(P).zip(rays.chunks(P)) {
+                let mut packet = [r[0]; P];
+                packet[..r.len()].copy_from_slice(r);
+                let b = accel.occluded_packet(&packet, (1u32 << r.len()) - 1);
+                for (i, o) in o.iter_mut().enumerate() {
+                    *o = b >> i & 1 != 0;
                 }
             }
         });

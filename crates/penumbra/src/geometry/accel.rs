@@ -459,6 +459,10 @@ impl<'a, E: Copy> Stack<'a, E> {
         self.len += 1;
     }
     #[inline(always)]
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+    #[inline(always)]
     fn pop(&mut self) -> Option<E> {
         if self.len == 0 {
             return None;
@@ -1336,9 +1340,29 @@ impl Accel {
         Node<W>: BoxTest<W>,
     {
         let tr = TRay::new(ray);
-        let tmin = ray.tmin;
         let mut c = Closest::new(ray.tmax);
-        stack.push((0, tmin));
+        self.closest_below(nodes, ray, &tr, (0, ray.tmin), &mut c, &mut stack);
+        c.best
+    }
+
+    /// The closest-hit walk of [`Accel::intersect`] below `root` (a node
+    /// and the ray's entry distance into it), improving on `c`; `stack`
+    /// is empty and left so. Packets finish each of their rays here where
+    /// few of them agree (`walk_packet`).
+    #[inline(always)]
+    fn closest_below<const W: usize>(
+        &self,
+        nodes: &[Node<W>],
+        ray: &Ray,
+        tr: &TRay,
+        root: (u32, f32),
+        c: &mut Closest,
+        stack: &mut Stack,
+    ) where
+        Node<W>: BoxTest<W>,
+    {
+        let tmin = ray.tmin;
+        stack.push(root);
         while let Some((mut cur, t_enter)) = stack.pop() {
             if t_enter > c.tmax {
                 continue;
@@ -1346,7 +1370,7 @@ impl Accel {
             // descend, nearest child first, the others onto the stack
             while cur & LEAF == 0 {
                 let n = node(nodes, cur);
-                let (mask, t0) = n.hit(&tr, tmin, c.tmax_far);
+                let (mask, t0) = n.hit(tr, tmin, c.tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -1424,7 +1448,6 @@ impl Accel {
                 pi += 1;
             }
         }
-        c.best
     }
 
     /// Whether anything blocks the ray on `(ray.tmin, ray.tmax)` (shadow
@@ -1453,14 +1476,30 @@ impl Accel {
     where
         Node<W>: BoxTest<W>,
     {
-        let tr = TRay::new(ray);
+        self.occluded_below(nodes, ray, &TRay::new(ray), 0, &mut stack)
+    }
+
+    /// The any-hit walk of [`Accel::occluded`] below node `root`; `stack`
+    /// is empty and left so.
+    #[inline(always)]
+    fn occluded_below<const W: usize>(
+        &self,
+        nodes: &[Node<W>],
+        ray: &Ray,
+        tr: &TRay,
+        root: u32,
+        stack: &mut Stack,
+    ) -> bool
+    where
+        Node<W>: BoxTest<W>,
+    {
         let (tmin, tmax) = (ray.tmin, ray.tmax);
         let tmax_far = tmax * FAR_ROUND_UP;
-        stack.push((0, tmin));
+        stack.push((root, tmin));
         while let Some((mut cur, _)) = stack.pop() {
             while cur & LEAF == 0 {
                 let n = node(nodes, cur);
-                let (mut mask, _) = n.hit(&tr, tmin, tmax_far);
+                let (mut mask, _) = n.hit(tr, tmin, tmax_far);
                 if mask == 0 {
                     cur = EMPTY;
                     break;
@@ -1481,6 +1520,7 @@ impl Accel {
             loop {
                 let p = self.packet(pi);
                 if tr.hit_tris(p, tmin, tmax).0 != 0 {
+                    stack.clear();
                     return true;
                 }
                 let mut m = p.analytic;
@@ -1488,6 +1528,7 @@ impl Accel {
                     let j = m.trailing_zeros() as usize;
                     m &= m - 1;
                     if self.analytic_occludes(p.shape[j], ray, tmin, tmax) {
+                        stack.clear();
                         return true;
                     }
                 }
@@ -1825,7 +1866,7 @@ mod tests {
     }
 
     /// Packets of `N` rays find the hits that the rays find one by one, bit
-    /// for bit: packets of nearly parallel rays from nearly one point (one
+    /// for bit, and the same rays blocked: packets of nearly parallel rays from nearly one point (one
     /// pixel's camera rays), of rays from one point to the neighbourhood
     /// of another, of unrelated rays, with some lanes inactive and some
     /// rays cut short, through triangles and an analytic sphere. (On a
@@ -1834,7 +1875,7 @@ mod tests {
         let mut rng = Rng(seed);
         for w in widths() {
             let accel = Accel::build_with_width(shapes, store, w);
-            let mut hits = 0;
+            let (mut hits, mut open) = (0, 0);
             for i in 0..600 {
                 let o = Vec3::new(rng.f() - 0.5, rng.f() - 0.5, rng.f() - 0.5) * 6.0;
                 let target = Vec3::new(rng.f() - 0.5, rng.f() - 0.5, rng.f() - 0.5) * 2.0;
@@ -1869,6 +1910,25 @@ mod tests {
                         kernels.push(("avx2", got));
                     }
                 }
+                // the same for occlusion
+                let mut blocked = vec![("dispatched", accel.occluded_packet(&rays, active))];
+                #[cfg(target_arch = "x86_64")]
+                if let Nodes::Eight(nodes) = &accel.nodes {
+                    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+                    if avx2 && accel.stack_size <= STACK && !nodes.is_empty() {
+                        // SAFETY: the processor has AVX2 and FMA.
+                        let got = unsafe { accel.occluded_packet_avx2(nodes, &rays, active) };
+                        blocked.push(("avx2", got));
+                    }
+                }
+                for (k, ray) in rays.iter().enumerate() {
+                    let want = active >> k & 1 != 0 && accel.occluded(ray);
+                    for (kernel, got) in &blocked {
+                        let at = format!("{kernel}, packet {i}, lane {k}: {ray:?}");
+                        assert_eq!(got >> k & 1 != 0, want, "occlusion, {at}");
+                    }
+                    open += (active >> k & 1 != 0 && !want) as usize;
+                }
                 for k in 0..N {
                     let want = (active >> k & 1 != 0)
                         .then(|| accel.intersect(&rays[k]))
@@ -1886,6 +1946,8 @@ mod tests {
                 }
             }
             assert!(hits > 600 * N / 5, "{hits} hits");
+            // the short rays, and rays that miss, are not blocked
+            assert!(open > 600 * N / 10, "{open} rays not blocked");
         }
     }
 

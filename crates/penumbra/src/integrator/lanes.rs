@@ -10,8 +10,10 @@
 //! light of plain intensity and of a `directional` light of plain
 //! irradiance are drawn here.
 //! A pixel's camera rays, up to [`PACKET`] of them, are traced together
-//! as one packet before their samples are shaded `N` at a time; the
-//! bounce and shadow rays' traversal, the other emitters' sampling and
+//! as one packet before their samples are shaded `N` at a time, and the
+//! primal image traces their light samples' shadow rays likewise, depth
+//! by depth, once their paths are done ([`ShadowQueue`]); the bounce
+//! rays' traversal, the other emitters' sampling and
 //! texture look-ups (at an interaction that holds only the hit's uv) are
 //! the plugins' own code, called lane by lane.
 //!
@@ -192,9 +194,9 @@ enum LaneLight<'a> {
 /// radiance, per depth (0: the vertex the camera ray reaches). Reverse
 /// mode in lanes (`diff/prb_lanes.rs`) keeps the factors of every
 /// contribution so as to differentiate the radiance by the reflectances
-/// and by the emitters' radiances;
-/// the primal image keeps nothing (`()`, whose empty calls compile away,
-/// closures and all).
+/// and by the emitters' radiances; the primal image keeps only the light
+/// samples' shadow rays, to trace later ([`ShadowQueue`]; its other calls
+/// are the empty defaults, which compile away, closures and all).
 pub(crate) trait PathLog<const N: usize> {
     /// The vertices the lanes' rays reached at `depth` (`None`: escaped
     /// or ended), their points and face normals.
@@ -235,6 +237,26 @@ pub(crate) trait PathLog<const N: usize> {
     ) {
         let _ = (depth, contribution);
     }
+    /// The shadow rays `ray(k)` of the light samples in the lanes of
+    /// `tried` at `depth`, whose contributions are `contribution()` where
+    /// they are not blocked: the lanes whose contribution counts now (the
+    /// loop adds it to the radiance and tells the log of it, by
+    /// [`PathLog::light`] and [`PathLog::next_event`]). Traced here, one
+    /// ray at a time; the primal image's log ([`ShadowQueue`]) takes them
+    /// to trace later, a pixel's rays of one depth as one packet, and
+    /// counts none now.
+    #[inline(always)]
+    fn shadows(
+        &mut self,
+        scene: &Scene,
+        depth: u32,
+        tried: LaneMask<N>,
+        ray: impl Fn(usize) -> Ray,
+        contribution: impl FnOnce() -> V3<Lanes<N>>,
+    ) -> LaneMask<N> {
+        let _ = (depth, contribution);
+        LaneMask::from_fn(|k| tried.lane(k) && !occluded(scene, &ray(k)))
+    }
     /// The bounce from `depth`: the throughput that reached the vertex,
     /// the BSDF sample's weight (a diffuse vertex's reflectance) and the
     /// roulette's factor on the throughput after it (0 where the path
@@ -251,7 +273,94 @@ pub(crate) trait PathLog<const N: usize> {
     }
 }
 
-impl<const N: usize> PathLog<N> for () {}
+/// The primal image's log: it keeps nothing of the paths but their light
+/// samples' shadow rays, which [`LanePath::trace`] would trace one at a
+/// time as it reaches them. Whether a light sample is blocked changes
+/// nothing else of its path, so they wait until all the samples of a
+/// [`CameraGroup`] are traced, and then go, depth by depth, as one packet
+/// of up to [`PACKET`] rays ([`Accel::occluded_packet`](crate::geometry::Accel::occluded_packet)):
+/// a pixel's shadow rays of one depth start near each other and, for an
+/// area light, end near each other, and the packet's walk tests a node
+/// once for all of them while enough of them enter it (docs/perf/traversal.md,
+/// "Shadow rays in packets").
+pub(crate) struct ShadowQueue {
+    /// Per depth, the shadow rays of the group's samples.
+    depths: Vec<ShadowBatch>,
+    /// The group's sample in lane 0 of the block being traced.
+    at: usize,
+}
+
+/// One depth's shadow rays of a group: per ray its sample in the group and
+/// its contribution to that sample's radiance where it is not blocked.
+#[derive(Clone, Copy)]
+struct ShadowBatch {
+    rays: [Ray; PACKET],
+    sample: [usize; PACKET],
+    contribution: [Vec3; PACKET],
+    count: usize,
+}
+
+impl ShadowQueue {
+    pub(crate) fn new() -> ShadowQueue {
+        ShadowQueue {
+            depths: Vec::new(),
+            at: 0,
+        }
+    }
+
+    /// Adds to `radiance` (per sample of the group) the contributions of
+    /// the shadow rays that are not blocked, and empties the queue.
+    fn resolve(&mut self, scene: &Scene, radiance: &mut [Vec3; PACKET]) {
+        for batch in &mut self.depths {
+            if batch.count == 0 {
+                continue;
+            }
+            let rays = u32::MAX >> (32 - batch.count);
+            let blocked = scene.accel.occluded_packet(&batch.rays, rays);
+            for i in 0..batch.count {
+                if blocked >> i & 1 == 0 {
+                    radiance[batch.sample[i]] += batch.contribution[i];
+                }
+            }
+            batch.count = 0;
+        }
+    }
+}
+
+impl<const N: usize> PathLog<N> for ShadowQueue {
+    #[inline(always)]
+    fn shadows(
+        &mut self,
+        _: &Scene,
+        depth: u32,
+        tried: LaneMask<N>,
+        ray: impl Fn(usize) -> Ray,
+        contribution: impl FnOnce() -> V3<Lanes<N>>,
+    ) -> LaneMask<N> {
+        let d = depth as usize;
+        if self.depths.len() <= d {
+            let empty = ShadowBatch {
+                rays: [Ray::new(Vec3::ZERO, Vec3::Z); PACKET],
+                sample: [0; PACKET],
+                contribution: [Vec3::ZERO; PACKET],
+                count: 0,
+            };
+            self.depths.resize(d + 1, empty);
+        }
+        let c = contribution();
+        let batch = &mut self.depths[d];
+        for k in 0..N {
+            if tried.lane(k) {
+                let i = batch.count;
+                batch.rays[i] = ray(k);
+                batch.sample[i] = self.at + k;
+                batch.contribution[i] = lane3(c, k);
+                batch.count += 1;
+            }
+        }
+        LaneMask::from_fn(|_| false)
+    }
+}
 
 /// Work done `N` lanes wide for a width chosen at run time ([`run_lanes`]):
 /// `run` is compiled once per width, inside an entry point that carries
@@ -519,6 +628,11 @@ impl<'a> LanePath<'a> {
         let filter = &layout.sensor.film.rfilter;
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
+        let mut shadows = ShadowQueue::new();
+        // per sample of the group, its radiance and whether its camera ray
+        // reached a surface
+        let mut radiance = [Vec3::ZERO; PACKET];
+        let mut reached = [false; PACKET];
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
                 let mut first = 0;
@@ -527,19 +641,30 @@ impl<'a> LanePath<'a> {
                     first += group.len() as u32;
                     for at in (0..group.len()).step_by(N) {
                         let SampleBlock {
-                            pos,
                             rays,
                             hits,
                             rngs,
                             active,
+                            ..
                         } = group.block::<N>(at);
-                        let (l, hit) = self.trace(rays, hits, active, rngs, &mut ());
+                        shadows.at = at;
+                        let (l, hit) = self.trace(rays, hits, active, rngs, &mut shadows);
+                        for k in 0..N {
+                            (radiance[at + k], reached[at + k]) = (lane3(l, k), hit[k]);
+                        }
+                    }
+                    shadows.resolve(self.scene, &mut radiance);
+                    for at in (0..group.len()).step_by(N) {
+                        let (pos, active) =
+                            (&group.pos, LaneMask::<N>::from_fn(|k| at + k < group.len()));
+                        let l: V3<Lanes<N>> = lanes3(|k| radiance[at + k]);
+                        let hit: [bool; N] = each_lane(|k| reached[at + k]);
                         // samples with a non-finite value are left out
                         let finite = l.x.finite() & l.y.finite() & l.z.finite();
                         let keep = each_lane(|k| active.lane(k) && finite.lane(k));
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep[k]).count();
-                        let px = each_lane(|k| pos[k].x);
-                        let py = each_lane(|k| pos[k].y);
+                        let px = each_lane(|k| pos[at + k].x);
+                        let py = each_lane(|k| pos[at + k].y);
                         let rgb = [l.x.0, l.y.0, l.z.0];
                         if alpha {
                             let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
@@ -679,9 +804,14 @@ impl<'a> LanePath<'a> {
             }
 
             // the vertex: its point, normals and shading frame in lanes
-            // (the dead lanes get a point at the origin facing +z)
+            // (the dead lanes get a point at the origin facing +z: their
+            // zero shading normal gives way to the face's). The arrays are
+            // filled with zeros, not with +z: LLVM built one lane's
+            // `[Vec3::Z; 3]` on the stack and copied it to the others with
+            // wider loads than its stores, each load stalled on them (3 %
+            // of cbox's kernel)
             let mut corners = [[Vec3::ZERO; 3]; N];
-            let mut normals = [[Vec3::Z; 3]; N];
+            let mut normals = [[Vec3::ZERO; 3]; N];
             let mut face_n = [Vec3::Z; N];
             let mut bary = [Vec2::ZERO; N];
             for k in 0..N {
@@ -769,8 +899,10 @@ impl<'a> LanePath<'a> {
             // light samples its point there, and the direction, density
             // and weight follow in lanes (as `Area::sample_direction`);
             // any other emitter samples by its own code
+            // (zeros where no sample is drawn, for the reason the
+            // vertex's normals are)
             let mut y = [Vec3::ZERO; N];
-            let mut yn = [Vec3::Z; N];
+            let mut yn = [Vec3::ZERO; N];
             let mut y_pdf = [0.0; N];
             let mut y_le = [Vec3::ZERO; N];
             // the emitter of each lane's sample, where its radiance is a
@@ -780,7 +912,7 @@ impl<'a> LanePath<'a> {
             // density, weight, whether it is a delta, and its shadow ray's
             // end: a point, or a direction for an emitter at infinity
             let mut other = [false; N];
-            let (mut o_d, mut o_pdf, mut o_w) = ([Vec3::Z; N], [0.0; N], [Vec3::ZERO; N]);
+            let (mut o_d, mut o_pdf, mut o_w) = ([Vec3::ZERO; N], [0.0; N], [Vec3::ZERO; N]);
             let (mut o_delta, mut o_far, mut o_end) = ([false; N], [false; N], [Vec3::ZERO; N]);
             if let Some(dist) = &scene.emitter_distribution {
                 // (a lane whose path ended draws nothing: its stream is
@@ -876,24 +1008,25 @@ impl<'a> LanePath<'a> {
             let wo = frame.to_local(d_em);
             let f = bsdf.eval(wo);
             let tried = sampled_em & !f.is_zero();
-            let visible = LaneMask::<N>::from_fn(|k| {
-                tried.lane(k) && {
-                    let ray = match (other[k], o_far[k]) {
-                        (false, _) => point(k).spawn_ray_to(y[k]),
-                        (true, false) => point(k).spawn_ray_to(o_end[k]),
-                        (true, true) => point(k).spawn_ray(o_end[k]),
-                    };
-                    !occluded(scene, &ray)
-                }
-            });
-            if visible.any() {
+            let shadow_ray = |k: usize| match (other[k], o_far[k]) {
+                (false, _) => point(k).spawn_ray_to(y[k]),
+                (true, false) => point(k).spawn_ray_to(o_end[k]),
+                (true, true) => point(k).spawn_ray(o_end[k]),
+            };
+            // the sample's MIS weight (one for a delta light) and its
+            // contribution where its shadow ray is not blocked
+            let weigh = || {
                 let mis = mis_weight(pdf_em, bsdf.pdf(wo));
                 let w = if any_other {
                     Lanes::select(LaneMask::<N>::from_fn(|k| o_delta[k]), one, mis)
                 } else {
                     mis
                 };
-                let c = throughput.mul_elem(f).mul_elem(weight) * w;
+                (w, throughput.mul_elem(f).mul_elem(weight) * w)
+            };
+            let visible = log.shadows(scene, depth, tried, shadow_ray, || weigh().1);
+            if visible.any() {
+                let (w, c) = weigh();
                 result += V3::select(visible, c, V3::zero());
                 // a plain radiance's sample weighs it by one over the
                 // sample's density (a directional light's irradiance: over
@@ -958,14 +1091,17 @@ impl<'a> LanePath<'a> {
             // infinite: divided by a survival probability of zero)
             throughput = V3::select(alive, throughput, V3::zero());
             let d = frame.to_world(wo).normalize();
+            // each hit is written where it is kept: through `then`, it
+            // came back in a temporary, copied with wider loads than the
+            // stores that had just written it, which waited on them (3 %
+            // of cbox's kernel)
             for k in 0..N {
-                hits[k] = alive
-                    .lane(k)
-                    .then(|| {
-                        rays[k] = point(k).spawn_ray(lane3(d, k));
-                        intersect(scene, &rays[k])
-                    })
-                    .flatten();
+                if alive.lane(k) {
+                    rays[k] = point(k).spawn_ray(lane3(d, k));
+                    hits[k] = intersect(scene, &rays[k]);
+                } else {
+                    hits[k] = None;
+                }
             }
             prev_p = p;
             prev_pdf = pdf;

@@ -3,12 +3,13 @@
 //! AVX-512 register or eight in an AVX2 one (Wald et al. 2001,
 //! "Interactive Rendering with Coherent Ray Tracing"; Embree's packet
 //! kernels). A node's box is tested against all the rays that reached it
-//! at once, and a triangle likewise. It pays for rays that take the same
-//! way through the tree: the path tracer in lanes traces each pixel's
-//! camera rays as one packet (`integrator::lanes`, up to sixteen rays: one
-//! origin, nearly one direction). For bounce and shadow rays it was
-//! slower than one ray at a time (docs/perf/traversal.md, "Camera rays in
-//! packets").
+//! at once, and a triangle likewise, until no more than [`SWITCH`] of them
+//! enter a node, below which each goes on alone. It pays for rays that
+//! take the same way through the tree: the path tracer in lanes traces
+//! each pixel's camera rays as one packet (`integrator::lanes`, up to
+//! sixteen rays: one origin, nearly one direction), and its shadow rays of
+//! one depth as one occlusion packet (docs/perf/traversal.md, "Camera
+//! rays in packets" and "Hybrid packets").
 //!
 //! The arithmetic per ray is that of the single-ray kernel ([`TRay`]),
 //! operation for operation, so that every hit is the same bit for bit;
@@ -19,6 +20,12 @@
 
 use super::*;
 use crate::ad::lanes::widest_lanes;
+
+/// A packet's rays that still enter a node, at or below which each of them
+/// is walked on alone (Embree's hybrid traversal, Benthin et al. 2012,
+/// "Combining Single and Packet-Ray Tracing for Arbitrary Ray
+/// Distributions on the Intel MIC Architecture").
+const SWITCH: u32 = 4;
 
 /// The rays of a packet as structure of arrays (see [`TRay`]): the near
 /// side of a box per axis is the max side where `neg`.
@@ -243,6 +250,56 @@ impl Accel {
         hits
     }
 
+    /// Which of the rays `rays[i]` for each bit `i` of `active` are
+    /// blocked (bit i set): [`Accel::occluded`] ray by ray. Traced as one
+    /// packet on an 8-wide tree where the processor has AVX-512 or AVX2,
+    /// else one by one.
+    pub fn occluded_packet<const N: usize>(&self, rays: &[Ray; N], active: u32) -> u32 {
+        const { assert!(N <= 32) };
+        #[cfg(target_arch = "x86_64")]
+        if let Nodes::Eight(nodes) = &self.nodes {
+            if self.stack_size <= STACK && !nodes.is_empty() {
+                match widest_lanes() {
+                    // SAFETY: as in `intersect_packet`
+                    16 => return unsafe { self.occluded_packet_avx512(nodes, rays, active) },
+                    8 => return unsafe { self.occluded_packet_avx2(nodes, rays, active) },
+                    _ => {}
+                }
+            }
+        }
+        let mut blocked = 0;
+        for (i, ray) in rays.iter().enumerate() {
+            if active >> i & 1 != 0 && self.occluded(ray) {
+                blocked |= 1 << i;
+            }
+        }
+        blocked
+    }
+
+    /// [`Accel::walk_packet_occluded`] compiled for AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+    fn occluded_packet_avx512<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> u32 {
+        self.walk_packet_occluded::<N, Avx512Bits>(nodes, rays, active)
+    }
+
+    /// [`Accel::walk_packet_occluded`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn occluded_packet_avx2<const N: usize>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> u32 {
+        self.walk_packet_occluded::<N, Avx2Bits>(nodes, rays, active)
+    }
+
     /// [`Accel::walk_packet`] compiled for AVX-512.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
@@ -297,8 +354,10 @@ impl Accel {
                 f32::NAN
             }
         });
+        let mut single_buf = [const { MaybeUninit::uninit() }; STACK];
+        let mut single = Stack::new(&mut single_buf);
         stack.push((0, root));
-        while let Some((mut cur, t_enter)) = stack.pop() {
+        'pop: while let Some((mut cur, mut t_enter)) = stack.pop() {
             // the rays that entered the node and found nothing nearer since
             let mut act = B::bits::<N>(|i| t_enter[i] <= tmax[i]);
             if act == 0 {
@@ -307,6 +366,20 @@ impl Accel {
             // descend, nearest child first (by its first ray's entry),
             // the others onto the stack
             while cur & LEAF == 0 {
+                if act.count_ones() <= SWITCH {
+                    // too few rays left to share the node's tests: each
+                    // goes on alone below it
+                    let mut m = act;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let tr = TRay::new(&rays[i]);
+                        let root = (cur, t_enter[i]);
+                        self.closest_below(nodes, &rays[i], &tr, root, &mut c[i], &mut single);
+                        (tmax[i], tmax_far[i]) = (c[i].tmax, c[i].tmax_far);
+                    }
+                    continue 'pop;
+                }
                 let n = node(nodes, cur);
                 let mut hits = [(0u32, 0u32, 0f32); 8];
                 let mut entries = [[0f32; N]; 8];
@@ -341,6 +414,7 @@ impl Accel {
                     stack.push((hits[q].0, entries[q]));
                 }
                 (cur, act) = (hits[count - 1].0, hits[count - 1].1);
+                t_enter = entries[count - 1];
             }
             if cur == EMPTY {
                 continue;
@@ -384,5 +458,105 @@ impl Accel {
             }
         }
         c.map(|c| c.best)
+    }
+
+    /// [`Accel::occluded_with`] for a packet: the rays still unblocked
+    /// walk the tree together, a stack entry being a node and the rays that
+    /// entered it (no entry distances: an occlusion query does not shorten
+    /// its rays, and takes the children in any order), until too few of
+    /// them enter a node to share its tests; each ray leaves the packet at
+    /// its first hit.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn walk_packet_occluded<const N: usize, B: RayBits>(
+        &self,
+        nodes: &[Node<8>],
+        rays: &[Ray; N],
+        active: u32,
+    ) -> u32 {
+        let pr = PacketRays::new(rays);
+        let tmax: [f32; N] = std::array::from_fn(|i| rays[i].tmax);
+        let tmax_far = tmax.map(|t| t * FAR_ROUND_UP);
+        // the rays not yet found blocked
+        let mut open = active;
+        let mut buf = [const { MaybeUninit::<(u32, u32)>::uninit() }; STACK];
+        let mut stack = Stack::new(&mut buf);
+        let mut single_buf = [const { MaybeUninit::uninit() }; STACK];
+        let mut single = Stack::new(&mut single_buf);
+        stack.push((0, active));
+        'pop: while let Some((mut cur, entered)) = stack.pop() {
+            let mut act = entered & open;
+            while cur & LEAF == 0 {
+                if act.count_ones() <= SWITCH {
+                    let mut m = act;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let tr = TRay::new(&rays[i]);
+                        if self.occluded_below(nodes, &rays[i], &tr, cur, &mut single) {
+                            open &= !(1 << i);
+                        }
+                    }
+                    if open == 0 {
+                        break 'pop;
+                    }
+                    continue 'pop;
+                }
+                let n = node(nodes, cur);
+                let mut next = None;
+                for k in 0..8 {
+                    if n.child[k] == EMPTY {
+                        continue;
+                    }
+                    let (mask, _) = pr.hit_box::<B>(n, k, &tmax_far, act);
+                    if mask == 0 {
+                        continue;
+                    }
+                    match next {
+                        None => next = Some((n.child[k], mask)),
+                        Some(_) => stack.push((n.child[k], mask)),
+                    }
+                }
+                let Some((child, mask)) = next else {
+                    continue 'pop;
+                };
+                (cur, act) = (child, mask);
+            }
+            let reached = act;
+            let mut pi = (cur & !LEAF) as usize;
+            loop {
+                let p = self.packet(pi);
+                for j in 0..4 {
+                    if p.shape[j] == u32::MAX || p.analytic >> j & 1 != 0 {
+                        continue;
+                    }
+                    act &= !pr.hit_tri::<B>(p, j, &tmax, act).0;
+                }
+                let mut m = p.analytic;
+                while m != 0 {
+                    let j = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let mut a = act;
+                    while a != 0 {
+                        let i = a.trailing_zeros() as usize;
+                        a &= a - 1;
+                        let (tmin, ray) = (pr.tmin[i], &rays[i]);
+                        if self.analytic_occludes(p.shape[j], ray, tmin, tmax[i]) {
+                            act &= !(1 << i);
+                        }
+                    }
+                }
+                if !p.more || act == 0 {
+                    break;
+                }
+                pi += 1;
+            }
+            // the rays that reached the leaf and were blocked in it
+            open &= !(reached & !act);
+            if open == 0 {
+                break;
+            }
+        }
+        active & !open
     }
 }
