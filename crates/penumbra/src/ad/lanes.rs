@@ -87,6 +87,12 @@ impl<const N: usize> Lanes<N> {
     pub fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
         Lanes(each_lane(f))
     }
+    /// The largest integer not above each lane's value (one rounding
+    /// instruction for all the lanes).
+    #[inline(always)]
+    pub fn floor(self) -> Self {
+        self.map(f32::floor)
+    }
     #[inline(always)]
     fn map(self, f: impl Fn(f32) -> f32) -> Self {
         Lanes(each_lane(|i| f(self.0[i])))

@@ -378,12 +378,14 @@ impl Bitmap {
         let (w, h) = (self.width, self.height);
         let x = u * w as f32 - 0.5;
         let y = v * h as f32 - 0.5;
-        let (mut fx, mut fy) = (x, y);
+        // `floor_i64` in lanes: the same integers (`as` saturates as it
+        // does) and fractions
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
         let mut taps = [[0usize; 4]; N];
         for (k, taps) in taps.iter_mut().enumerate() {
             if lanes.lane(k) {
-                let (x0, y0) = (floor_i64(x.0[k]), floor_i64(y.0[k]));
-                (fx.0[k], fy.0[k]) = (x.0[k] - x0 as f32, y.0[k] - y0 as f32);
+                let (x0, y0) = (x0.0[k] as i64, y0.0[k] as i64);
                 let (xa, xb) = (self.wrap.wrap(x0, w), self.wrap.wrap(x0 + 1, w));
                 let (ya, yb) = (self.wrap.wrap(y0, h), self.wrap.wrap(y0 + 1, h));
                 *taps = [ya * w + xa, ya * w + xb, yb * w + xa, yb * w + xb];
