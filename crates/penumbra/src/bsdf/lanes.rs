@@ -147,13 +147,18 @@ pub(crate) type LaneSample<const N: usize> = (
 /// The BSDFs at the vertices of a block's lanes, seen from the lanes'
 /// incident directions `wi` (local frames), with their diffuse
 /// reflectances.
-pub(crate) struct BsdfLanes<'a, const N: usize> {
+/// It borrows the other plugins' parameters ([`MixedLanes`]) where it
+/// would hold them: with them inside, it was too large for registers and
+/// was copied on its way into place, whichever BSDFs the block has, with
+/// loads that waited on the stores that had just made its parts (4 % of
+/// the kernels' samples on cbox, whose BSDFs are all `diffuse`).
+pub(crate) struct BsdfLanes<'m, 'a, const N: usize> {
     wi: V3<Lanes<N>>,
     albedo: V3<Lanes<N>>,
     /// Where a lane has another plugin than `diffuse`, the plugins'
     /// parameters in lanes; else the block's values, densities and samples
     /// are the Lambertian ones, inline.
-    mixed: Option<MixedLanes<'a, N>>,
+    mixed: Option<&'m MixedLanes<'a, N>>,
 }
 
 /// The BSDFs of a block some of whose lanes have other plugins than
@@ -161,7 +166,7 @@ pub(crate) struct BsdfLanes<'a, const N: usize> {
 /// inlined into the loop's eight kernels (four widths, primal and reverse
 /// mode), they took LLVM over fifteen minutes to compile, and gathering
 /// their parameters inline made cbox, which has none of them, 14 % slower.
-struct MixedLanes<'a, const N: usize> {
+pub(crate) struct MixedLanes<'a, const N: usize> {
     wi: V3<Lanes<N>>,
     /// The lanes of each plugin (a lane without a vertex has none).
     diffuse: LaneMask<N>,
@@ -187,22 +192,18 @@ struct MixedLanes<'a, const N: usize> {
     base: V3<Lanes<N>>,
 }
 
-impl<'a, const N: usize> BsdfLanes<'a, N> {
-    /// The BSDFs `bsdf(k)` of the lanes `k` (`None`: a lane without a
-    /// vertex) with diffuse reflectances `albedo`, seen along `wi`;
-    /// `mixed` says whether some lane has another plugin than `diffuse`.
+impl<'m, 'a, const N: usize> BsdfLanes<'m, 'a, N> {
+    /// The BSDFs of the lanes with diffuse reflectances `albedo`, seen
+    /// along `wi`: `mixed` (from [`MixedLanes::new`] with the same
+    /// `albedo` and `wi`) where some lane has another plugin than
+    /// `diffuse`, else `None`.
     #[inline(always)]
     pub(crate) fn new(
-        mixed: bool,
-        bsdf: impl Fn(usize) -> Option<LaneBsdf<'a>>,
+        mixed: Option<&'m MixedLanes<'a, N>>,
         albedo: V3<Lanes<N>>,
         wi: V3<Lanes<N>>,
     ) -> Self {
-        BsdfLanes {
-            wi,
-            albedo,
-            mixed: mixed.then(|| MixedLanes::new(&bsdf, albedo, wi)),
-        }
+        BsdfLanes { wi, albedo, mixed }
     }
 
     /// `f(wi, wo) · |cos θo|` per lane.
@@ -241,9 +242,11 @@ impl<'a, const N: usize> BsdfLanes<'a, N> {
 }
 
 impl<'a, const N: usize> MixedLanes<'a, N> {
-    /// The parameters of the lanes' plugins (see [`BsdfLanes::new`]).
+    /// The parameters of the plugins `bsdfs(k)` of the lanes `k` (`None`:
+    /// a lane without a vertex), with diffuse reflectances `albedo`, seen
+    /// along `wi`.
     #[inline(never)]
-    fn new(
+    pub(crate) fn new(
         bsdfs: &impl Fn(usize) -> Option<LaneBsdf<'a>>,
         albedo: V3<Lanes<N>>,
         wi: V3<Lanes<N>>,
@@ -558,13 +561,28 @@ mod tests {
         .collect()
     }
 
-    /// `b` in four lanes seen along `wi`.
-    fn lanes<'a>(b: &'a Bsdf, store: &ParamStore, wi: [Vec3; 4]) -> BsdfLanes<'a, 4> {
+    /// What [`BsdfLanes`] reads of `b` in four lanes seen along `wi`
+    /// ([`Lanes4::bsdf`]).
+    struct Lanes4<'a> {
+        mixed: Option<MixedLanes<'a, 4>>,
+        albedo: V3<Lanes<4>>,
+        wi: V3<Lanes<4>>,
+    }
+
+    impl<'a> Lanes4<'a> {
+        fn bsdf(&self) -> BsdfLanes<'_, 'a, 4> {
+            BsdfLanes::new(self.mixed.as_ref(), self.albedo, self.wi)
+        }
+    }
+
+    fn lanes<'a>(b: &'a Bsdf, store: &ParamStore, wi: [Vec3; 4]) -> Lanes4<'a> {
         let view = store.primal();
         let (lb, albedo) = LaneBsdf::of(b, &view).expect("written for lanes");
-        let albedo = albedo.map_or(Vec3::ZERO, |t| plain(t, &view).unwrap());
+        let albedo = V3::cst(albedo.map_or(Vec3::ZERO, |t| plain(t, &view).unwrap()));
+        let wi = v3(wi);
         let mixed = !matches!(lb, LaneBsdf::Diffuse);
-        BsdfLanes::new(mixed, |_| Some(lb), V3::cst(albedo), v3(wi))
+        let mixed = mixed.then(|| MixedLanes::new(&|_| Some(lb), albedo, wi));
+        Lanes4 { mixed, albedo, wi }
     }
 
     fn v3(v: [Vec3; 4]) -> V3<Lanes<4>> {
@@ -594,7 +612,8 @@ mod tests {
                     std::array::from_fn(|_| square_to_uniform_sphere(rng.next_2d()));
                 let wo: [Vec3; 4] =
                     std::array::from_fn(|_| square_to_uniform_sphere(rng.next_2d()));
-                let bl = lanes(&b, &store, wi);
+                let case = lanes(&b, &store, wi);
+                let bl = case.bsdf();
                 let (f, p) = (bl.eval(v3(wo)), bl.pdf(v3(wo)));
                 for k in 0..4 {
                     let f_ref = eval_f32(&b, &store, wi[k], wo[k]);
@@ -625,7 +644,8 @@ mod tests {
         for (name, b, store) in plugins() {
             for wi in [dir(0.9, 0.3), dir(0.3, 2.0), dir(-0.6, 1.0), Vec3::Z] {
                 let ctx = b.context(&store.primal(), &si::<f32>(wi));
-                let bl = lanes(&b, &store, [wi; 4]);
+                let case = lanes(&b, &store, [wi; 4]);
+                let bl = case.bsdf();
                 let (mut rng_a, mut rng_b) = (Pcg32::new(1), Pcg32::new(2));
                 let (mut sa, mut sa2, mut sb, mut sb2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
                 for _ in 0..n / 4 {

@@ -36,7 +36,7 @@ use super::{mis_weight, survival_probability, Integrator};
 use crate::ad::lanes::{each_lane, lane3, lanes3, widest_lanes, LaneMask, Lanes};
 use crate::ad::{Float, Mask, Real};
 use crate::bsdf::lambert_eval;
-use crate::bsdf::lanes::{BsdfLanes, LaneBsdf};
+use crate::bsdf::lanes::{BsdfLanes, LaneBsdf, MixedLanes};
 use crate::emitter::{point_light_sample, surface_si, Constant, Emitter, EmitterT};
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
@@ -813,14 +813,14 @@ impl<'a> LanePath<'a> {
             let mut corners = [[Vec3::ZERO; 3]; N];
             let mut normals = [[Vec3::ZERO; 3]; N];
             let mut face_n = [Vec3::Z; N];
-            let mut bary = [Vec2::ZERO; N];
+            let mut mesh_hit = [false; N];
             for k in 0..N {
                 let Some(hit) = &hits[k] else { continue };
                 match self.shapes[hit.shape as usize].geometry {
                     LaneGeometry::Mesh(mesh) => {
                         (corners[k], normals[k], face_n[k]) =
                             mesh.corners_primal(&scene.params, hit.prim);
-                        bary[k] = hit.uv;
+                        mesh_hit[k] = true;
                     }
                     // the point as the first corner at barycentrics
                     // (0, 0), exactly
@@ -837,8 +837,17 @@ impl<'a> LanePath<'a> {
                     }
                 }
             }
-            let b1 = Lanes::<N>::from_fn(|k| bary[k].x);
-            let b2 = Lanes::<N>::from_fn(|k| bary[k].y);
+            // the barycentrics read from the hits, written long before,
+            // not from an array filled lane by lane in the loop above:
+            // LLVM read such an array two lanes to a load, which waited on
+            // the narrower stores that had just filled it (1.9 % of the
+            // replay kernel's samples on cbox)
+            let bary_of = |k: usize| match hits[k] {
+                Some(hit) if mesh_hit[k] => hit.uv,
+                _ => Vec2::ZERO,
+            };
+            let b1 = Lanes::<N>::from_fn(|k| bary_of(k).x);
+            let b2 = Lanes::<N>::from_fn(|k| bary_of(k).y);
             let b0 = one - b1 - b2;
             let at = |c: &[[Vec3; 3]; N]| {
                 lanes3(|k| c[k][0]) * b0 + lanes3(|k| c[k][1]) * b1 + lanes3(|k| c[k][2]) * b2
@@ -893,7 +902,8 @@ impl<'a> LanePath<'a> {
             let bsdf_of = |k: usize| hits[k].map(|hit| self.shapes[hit.shape as usize].bsdf);
             let mixed = self.mixed_bsdfs
                 && (0..N).any(|k| !matches!(bsdf_of(k), None | Some(LaneBsdf::Diffuse)));
-            let bsdf = BsdfLanes::new(mixed, bsdf_of, albedo, wi);
+            let others = mixed.then(|| MixedLanes::new(&bsdf_of, albedo, wi));
+            let bsdf = BsdfLanes::new(others.as_ref(), albedo, wi);
 
             // next-event estimation: a lane that picks a mesh's area
             // light samples its point there, and the direction, density
