@@ -282,7 +282,8 @@ pub(crate) trait PathLog<const N: usize> {
 /// a pixel's shadow rays of one depth start near each other and, for an
 /// area light, end near each other, and the packet's walk tests a node
 /// once for all of them while enough of them enter it (docs/perf/traversal.md,
-/// "Shadow rays in packets").
+/// "Hybrid packets, an occlusion packet, and a pixel's shadow rays as
+/// packets").
 pub(crate) struct ShadowQueue {
     /// Per depth, the shadow rays of the group's samples.
     depths: Vec<ShadowBatch>,
