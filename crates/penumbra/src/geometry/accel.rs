@@ -1898,25 +1898,18 @@ mod tests {
                 } else {
                     u32::MAX >> (32 - N)
                 };
-                // the kernel `intersect_packet` picks, and the AVX2 one
-                // also where the processor would pick AVX-512's
+                // the kernels `intersect_packet` and `occluded_packet`
+                // pick, and the AVX2 ones also where the processor would
+                // pick AVX-512's
                 let mut kernels = vec![("dispatched", accel.intersect_packet(&rays, active))];
+                let mut blocked = vec![("dispatched", accel.occluded_packet(&rays, active))];
                 #[cfg(target_arch = "x86_64")]
-                if let Nodes::Eight(nodes) = &accel.nodes {
-                    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
-                    if avx2 && accel.stack_size <= STACK && !nodes.is_empty() {
+                if let Some(nodes) = accel.packet_tree() {
+                    if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
                         // SAFETY: the processor has AVX2 and FMA.
                         let got = unsafe { accel.intersect_packet_avx2(nodes, &rays, active) };
                         kernels.push(("avx2", got));
-                    }
-                }
-                // the same for occlusion
-                let mut blocked = vec![("dispatched", accel.occluded_packet(&rays, active))];
-                #[cfg(target_arch = "x86_64")]
-                if let Nodes::Eight(nodes) = &accel.nodes {
-                    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
-                    if avx2 && accel.stack_size <= STACK && !nodes.is_empty() {
-                        // SAFETY: the processor has AVX2 and FMA.
+                        // SAFETY: as above
                         let got = unsafe { accel.occluded_packet_avx2(nodes, &rays, active) };
                         blocked.push(("avx2", got));
                     }

@@ -229,16 +229,14 @@ impl Accel {
     ) -> [Option<Hit>; N] {
         const { assert!(N <= 32) };
         #[cfg(target_arch = "x86_64")]
-        if let Nodes::Eight(nodes) = &self.nodes {
-            if self.stack_size <= STACK && !nodes.is_empty() {
-                match widest_lanes() {
-                    // SAFETY: `widest_lanes` is 16 only where the
-                    // processor has AVX-512 (F, VL, DQ, BW), AVX2 and FMA,
-                    // and 8 only where it has AVX2 and FMA.
-                    16 => return unsafe { self.intersect_packet_avx512(nodes, rays, active) },
-                    8 => return unsafe { self.intersect_packet_avx2(nodes, rays, active) },
-                    _ => {}
-                }
+        if let Some(nodes) = self.packet_tree() {
+            match widest_lanes() {
+                // SAFETY: `widest_lanes` is 16 only where the processor
+                // has AVX-512 (F, VL, DQ, BW), AVX2 and FMA, and 8 only
+                // where it has AVX2 and FMA.
+                16 => return unsafe { self.intersect_packet_avx512(nodes, rays, active) },
+                8 => return unsafe { self.intersect_packet_avx2(nodes, rays, active) },
+                _ => {}
             }
         }
         let mut hits = [None; N];
@@ -250,6 +248,17 @@ impl Accel {
         hits
     }
 
+    /// The tree, where packets walk it: 8 wide, not empty, and shallow
+    /// enough for the packet kernels' stacks on the machine stack (else
+    /// the rays go one by one).
+    #[cfg(target_arch = "x86_64")]
+    pub(super) fn packet_tree(&self) -> Option<&[Node<8>]> {
+        match &self.nodes {
+            Nodes::Eight(nodes) if self.stack_size <= STACK && !nodes.is_empty() => Some(nodes),
+            _ => None,
+        }
+    }
+
     /// Which of the rays `rays[i]` for each bit `i` of `active` are
     /// blocked (bit i set): [`Accel::occluded`] ray by ray. Traced as one
     /// packet on an 8-wide tree where the processor has AVX-512 or AVX2,
@@ -257,14 +266,12 @@ impl Accel {
     pub fn occluded_packet<const N: usize>(&self, rays: &[Ray; N], active: u32) -> u32 {
         const { assert!(N <= 32) };
         #[cfg(target_arch = "x86_64")]
-        if let Nodes::Eight(nodes) = &self.nodes {
-            if self.stack_size <= STACK && !nodes.is_empty() {
-                match widest_lanes() {
-                    // SAFETY: as in `intersect_packet`
-                    16 => return unsafe { self.occluded_packet_avx512(nodes, rays, active) },
-                    8 => return unsafe { self.occluded_packet_avx2(nodes, rays, active) },
-                    _ => {}
-                }
+        if let Some(nodes) = self.packet_tree() {
+            match widest_lanes() {
+                // SAFETY: as in `intersect_packet`
+                16 => return unsafe { self.occluded_packet_avx512(nodes, rays, active) },
+                8 => return unsafe { self.occluded_packet_avx2(nodes, rays, active) },
+                _ => {}
             }
         }
         let mut blocked = 0;
