@@ -26,10 +26,11 @@ use super::{
     delta_shadow_boundary, primary_boundary, shadow_boundary, warn_missing_boundary_terms,
     BoundaryTerms,
 };
-use crate::ad::lanes::each_lane;
+use crate::ad::lanes::{each_lane, LaneMask, Lanes};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::Var;
 use crate::error::{Error, Result};
+use crate::image::film::PixelSplat;
 use crate::image::ImageBlock;
 use crate::integrator::lanes::lane_width;
 use crate::integrator::render::{report_non_finite, SampleLayout};
@@ -307,19 +308,35 @@ pub(super) fn backward_pass(
     // 1. total filter weight per pixel (positions only: no tracing)
     let weight_blocks = layout.map_tiles(opts, |tile| {
         let mut block = layout.tile_block(tile, 0);
-        // a pixel's samples eight at a time: each pixel they reach is
-        // updated once per eight, not once per sample
+        // a pixel's samples eight at a time, summed over the pixel before
+        // each pixel they reach is updated (filters too wide for the
+        // window one sample at a time)
         const N: usize = 8;
+        let mut splat = PixelSplat::<N>::new(filter);
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
+                if let Some(splat) = &mut splat {
+                    splat.start(x, y);
+                }
                 for first in (0..layout.spp).step_by(N) {
                     let pos: [Vec2; N] = each_lane(|k| {
                         let s = (first + k as u32).min(layout.spp - 1);
                         layout.camera_sample(x, y, s).0
                     });
-                    let keep = each_lane(|k| first + (k as u32) < layout.spp);
-                    let (px, py) = (pos.map(|p| p.x), pos.map(|p| p.y));
-                    block.put_lanes::<N, 0>(filter, px, py, [], keep);
+                    let keep = LaneMask::from_fn(|k| first + (k as u32) < layout.spp);
+                    let px = Lanes::from_fn(|k| pos[k].x);
+                    let py = Lanes::from_fn(|k| pos[k].y);
+                    match &mut splat {
+                        Some(splat) => splat.add::<0>(filter, px, py, [], keep),
+                        None => {
+                            for k in (0..N).filter(|&k| keep.lane(k)) {
+                                block.put(filter, px.0[k], py.0[k], &[]);
+                            }
+                        }
+                    }
+                }
+                if let Some(splat) = &splat {
+                    splat.flush::<0>(&mut block);
                 }
             }
         }

@@ -55,14 +55,14 @@
 //! `prb.rs`, which records whole paths.
 
 use super::prb::TileSums;
-use crate::ad::lanes::{each_lane, lane3, LaneMask, Lanes};
+use crate::ad::lanes::{lane3, lanes3, LaneMask, Lanes};
 use crate::ad::reverse::{backward, clear_tape};
 use crate::ad::{Float, Mask, Var};
 use crate::bsdf::lanes::LaneBsdf;
 use crate::bsdf::Bsdf;
 use crate::emitter::{surface_si, Emitter};
 use crate::geometry::Hit;
-use crate::image::film::AdjointImage;
+use crate::image::film::{AdjointImage, PixelGather};
 use crate::integrator::lanes::{
     run_lanes, CameraGroup, LaneKernel, LanePath, PathLog, SampleBlock,
 };
@@ -232,8 +232,13 @@ impl<'a> LaneAdjoint<'a> {
         let mut radiance = vec![DVec3::ZERO; log.emitters.len()];
         let mut non_finite = 0;
         let mut group = CameraGroup::new();
+        // (filters wider than its window take `AdjointImage::gather`)
+        let mut window = PixelGather::new(filter);
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
+                if let Some(window) = &mut window {
+                    window.start(adjoint, x, y);
+                }
                 let mut first = 0;
                 while first < layout.spp {
                     self.lanes.camera_group(layout, x, y, first, &mut group);
@@ -246,11 +251,17 @@ impl<'a> LaneAdjoint<'a> {
                             rngs,
                             active,
                         } = group.block::<N>(at);
-                        let delta: [[f32; 3]; N] =
-                            each_lane(|k| adjoint.gather(filter, pos[k].x, pos[k].y));
+                        let delta = match &window {
+                            Some(window) => {
+                                let px = Lanes::<N>::from_fn(|k| pos[k].x);
+                                let py = Lanes::<N>::from_fn(|k| pos[k].y);
+                                let [r, g, b] = window.gather(filter, px, py);
+                                V3::new(r, g, b)
+                            }
+                            None => lanes3(|k| adjoint.gather(filter, pos[k].x, pos[k].y).into()),
+                        };
                         // a sample without adjoint radiance is not shaded
-                        let active =
-                            LaneMask::<N>::from_fn(|k| active.lane(k) && delta[k] != [0.0; 3]);
+                        let active = active & !delta.is_zero();
                         if active.none() {
                             continue;
                         }
@@ -266,11 +277,7 @@ impl<'a> LaneAdjoint<'a> {
                         // samples with a non-finite radiance are left out
                         let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
                         non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
-                        let delta = V3::new(
-                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][0] } else { 0.0 }),
-                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][1] } else { 0.0 }),
-                            Lanes::from_fn(|k| if keep.lane(k) { delta[k][2] } else { 0.0 }),
-                        );
+                        let delta = V3::select(keep, delta, V3::zero());
                         for (sum, per_radiance) in radiance.iter_mut().zip(&log.per_radiance) {
                             // (a left-out lane's light may not be finite)
                             let g = V3::select(keep, delta.mul_elem(*per_radiance), V3::zero());

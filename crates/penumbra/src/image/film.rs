@@ -2,6 +2,8 @@
 //! filter, and the accumulation of filtered samples.
 
 use super::rfilter::ReconstructionFilter;
+use crate::ad::lanes::{LaneMask, Lanes};
+use crate::ad::{Float, Mask, Real};
 use crate::error::Result;
 use crate::math::{ceil_i64, floor_i64};
 use crate::scene::{Class, Node};
@@ -238,136 +240,6 @@ impl ImageBlock {
         });
     }
 
-    /// [`ImageBlock::put`] of `N` samples at once (the lanes of the path
-    /// tracer in lanes, `integrator::lanes`): sample `k` at `(px[k],
-    /// py[k])` with the values `values[c][k]`, left out where `keep[k]` is
-    /// false. Each sample gets `put`'s weights (its own span of the filter,
-    /// clipped to the block as there), and each pixel the samples reach is
-    /// updated once with their sum, not once per sample: the samples of one
-    /// pixel, which this is for, reach the same few pixels. Inlined, so
-    /// that the sums over the lanes compile with the caller's vector width.
-    #[inline(always)]
-    pub fn put_lanes<const N: usize, const C: usize>(
-        &mut self,
-        filter: &ReconstructionFilter,
-        px: [f32; N],
-        py: [f32; N],
-        values: [[f32; N]; C],
-        keep: [bool; N],
-    ) {
-        debug_assert_eq!(C, self.channels);
-        let (x0, y0) = (self.x0, self.y0);
-        let (x1, y1) = (x0 + self.width as i64 - 1, y0 + self.height as i64 - 1);
-        // a left-out value may be NaN: zero it, as its weights are
-        let values = values.map(|v| {
-            let mut v = v;
-            for k in 0..N {
-                if !keep[k] {
-                    v[k] = 0.0;
-                }
-            }
-            v
-        });
-        let stride = C + 1;
-        let Some(first) = keep.iter().position(|&k| k) else {
-            return;
-        };
-        if let ReconstructionFilter::Box = filter {
-            // `footprint_in`'s shortcut for all the samples at once: when
-            // each is strictly inside the same pixel, that pixel alone
-            // gets them, with weight one. (This also keeps the box filter
-            // away from `eval_span`, where the compiler computes the other
-            // filters' constants from the enum's bytes ahead of the match,
-            // bytes that for a box are no floats: with every sample of
-            // textured going through it, the render took 1.8 times as
-            // long, most of it on those few multiplies; likely subnormal
-            // operands, which Intel processors handle in microcode.)
-            let (i, j) = (px[first] as i64, py[first] as i64);
-            let inside = (0..N).all(|k| {
-                !keep[k]
-                    || (px[k] as i64 == i
-                        && py[k] as i64 == j
-                        && (i as f32) < px[k]
-                        && (j as f32) < py[k])
-            });
-            if inside {
-                if (x0..=x1).contains(&i) && (y0..=y1).contains(&j) {
-                    let o = (((j - y0) as usize) * self.width + (i - x0) as usize) * stride;
-                    let pixel = &mut self.data[o..o + stride];
-                    for (acc, v) in pixel.iter_mut().zip(&values) {
-                        *acc += lane_sum::<N>(|k| v[k] as f64);
-                    }
-                    pixel[C] += keep.iter().filter(|&&k| k).count() as f64;
-                }
-                return;
-            }
-        }
-        // each sample's span of columns and rows, as `footprint_in` has it
-        let r = filter.radius();
-        let mut spans = [None; N];
-        let (mut i_lo, mut i_hi, mut j_lo, mut j_hi) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
-        for k in (0..N).filter(|&k| keep[k]) {
-            let i0 = ceil_i64(px[k] - 0.5 - r).max(x0);
-            let i1 = floor_i64(px[k] - 0.5 + r).min(x1);
-            let j0 = ceil_i64(py[k] - 0.5 - r).max(y0);
-            let j1 = floor_i64(py[k] - 0.5 + r).min(y1);
-            if i1 < i0 || j1 < j0 {
-                continue;
-            }
-            spans[k] = Some((i0, i1, j0, j1));
-            (i_lo, i_hi) = (i_lo.min(i0), i_hi.max(i1));
-            (j_lo, j_hi) = (j_lo.min(j0), j_hi.max(j1));
-        }
-        if i_hi < i_lo {
-            return;
-        }
-        const CACHE: usize = 16;
-        let (nx, ny) = ((i_hi - i_lo + 1) as usize, (j_hi - j_lo + 1) as usize);
-        if nx > CACHE || ny > CACHE {
-            for k in (0..N).filter(|&k| keep[k]) {
-                self.put(filter, px[k], py[k], &values.map(|v| v[k]));
-            }
-            return;
-        }
-        // per column and row of the union of the spans, each lane's weight
-        // (zero outside its span and for lanes left out)
-        let (mut wx, mut wy) = ([[0.0f32; N]; CACHE], [[0.0f32; N]; CACHE]);
-        let mut span_w = [0.0f32; CACHE];
-        for k in 0..N {
-            let Some((i0, i1, j0, j1)) = spans[k] else {
-                continue;
-            };
-            let n = (i1 - i0 + 1) as usize;
-            filter.eval_span(i0, px[k], &mut span_w[..n]);
-            for (d, &w) in span_w[..n].iter().enumerate() {
-                wx[(i0 - i_lo) as usize + d][k] = w;
-            }
-            let n = (j1 - j0 + 1) as usize;
-            filter.eval_span(j0, py[k], &mut span_w[..n]);
-            for (d, &w) in span_w[..n].iter().enumerate() {
-                wy[(j0 - j_lo) as usize + d][k] = w;
-            }
-        }
-        for (dj, ey) in wy[..ny].iter().enumerate() {
-            let row = ((j_lo + dj as i64 - y0) as usize) * self.width;
-            for (di, ex) in wx[..nx].iter().enumerate() {
-                let mut w = [0.0f32; N];
-                for k in 0..N {
-                    w[k] = ey[k] * ex[k];
-                }
-                if w.iter().all(|&w| w == 0.0) {
-                    continue;
-                }
-                let o = (row + (i_lo + di as i64 - x0) as usize) * stride;
-                let pixel = &mut self.data[o..o + stride];
-                for (acc, v) in pixel.iter_mut().zip(&values) {
-                    *acc += lane_sum::<N>(|k| w[k] as f64 * v[k] as f64);
-                }
-                pixel[C] += lane_sum::<N>(|k| w[k] as f64);
-            }
-        }
-    }
-
     /// The adjoint of developing, for the adjoint of splatting
     /// ([`AdjointImage::gather`]): `d_image[p] / W_p` per pixel p and
     /// channel, where `W_p` is pixel p's total filter weight (the weight
@@ -459,6 +331,222 @@ impl AdjointImage {
     }
 }
 
+/// The most pixels a sample reaches on each side of its own through
+/// [`PixelSplat`] and [`PixelGather`]: Lanczos' three lobes, a Gaussian
+/// up to σ = 0.875. Wider filters take the per-sample [`ImageBlock::put`]
+/// and [`AdjointImage::gather`].
+const MAX_REACH: usize = 3;
+/// Pixels of the widest window, row by row.
+const WINDOW: usize = (2 * MAX_REACH + 1) * (2 * MAX_REACH + 1);
+/// Channels a [`PixelSplat`] sums (RGB and alpha).
+const MAX_CHANNELS: usize = 4;
+
+/// How far `filter` reaches from a sample's own pixel, where that fits a
+/// window of [`MAX_REACH`]: a sample in pixel x (at a position in `[x,
+/// x + 1]`, the end included for rounding) reaches the pixels whose
+/// centres are within the radius r, `ceil(x − 0.5 − r) ≥ x − ⌊r + 0.5⌋`
+/// to `floor(x + 0.5 + r) = x + ⌊r + 0.5⌋`.
+fn window_reach(filter: &ReconstructionFilter) -> Option<usize> {
+    let reach = (filter.radius() + 0.5).floor();
+    (reach <= MAX_REACH as f32).then_some(reach as usize)
+}
+
+/// The samples of one pixel splatted `N` at a time (the path tracer in
+/// lanes, `integrator::lanes`), summed where they land: per pixel of the
+/// window the filter reaches from the sample's pixel, per channel and
+/// for the weights, each lane's running sum in f32, added once into the
+/// block's f64 sums when the pixel is done ([`PixelSplat::flush`]). A
+/// block of samples thus costs the window's multiplies and adds in lanes,
+/// where splatting it sample by sample into the f64 sums took each pixel's
+/// sum over the lanes (13 % of cbox's lane kernel with its Gaussian
+/// filter).
+pub struct PixelSplat<const N: usize> {
+    x: i64,
+    y: i64,
+    reach: usize,
+    /// Per pixel of the window, row by row: the sums of the channels'
+    /// weighted values, then of the weights.
+    sums: [[Lanes<N>; MAX_CHANNELS + 1]; WINDOW],
+}
+
+impl<const N: usize> PixelSplat<N> {
+    /// A splat for `filter`, if its window is small enough.
+    pub fn new(filter: &ReconstructionFilter) -> Option<PixelSplat<N>> {
+        Some(PixelSplat {
+            x: 0,
+            y: 0,
+            reach: window_reach(filter)?,
+            sums: [[Lanes::splat(0.0); MAX_CHANNELS + 1]; WINDOW],
+        })
+    }
+
+    /// Starts pixel `(x, y)`, with nothing splatted (after the previous
+    /// pixel's [`PixelSplat::flush`]).
+    #[inline(always)]
+    pub fn start(&mut self, x: i64, y: i64) {
+        let side = 2 * self.reach + 1;
+        (self.x, self.y) = (x, y);
+        for s in &mut self.sums[..side * side] {
+            *s = [Lanes::splat(0.0); MAX_CHANNELS + 1];
+        }
+    }
+
+    /// Splats sample `k` at `(px[k], py[k])`, in this pixel, with the
+    /// values `values[c][k]`; lanes where `keep[k]` is false are left out
+    /// (their values may be NaN).
+    #[inline(always)]
+    pub fn add<const C: usize>(
+        &mut self,
+        filter: &ReconstructionFilter,
+        px: Lanes<N>,
+        py: Lanes<N>,
+        values: [Lanes<N>; C],
+        keep: LaneMask<N>,
+    ) {
+        const { assert!(C <= MAX_CHANNELS) };
+        debug_assert!((0..N).all(|k| !keep.lane(k)
+            || ((self.x as f32..=self.x as f32 + 1.0).contains(&px.0[k])
+                && (self.y as f32..=self.y as f32 + 1.0).contains(&py.0[k]))));
+        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let zero = Lanes::splat(0.0);
+        let values = values.map(|v| Lanes::select(keep, v, zero));
+        if let ReconstructionFilter::Box = filter {
+            // samples strictly inside the pixel (all of them, nearly
+            // always) reach it alone, with weight one: as `footprint_in`
+            // has it, without the window's weights
+            let (x, y) = (self.x as f32, self.y as f32);
+            let inside = px.gt(x) & px.lt(x + 1.0) & py.gt(y) & py.lt(y + 1.0);
+            if (inside | !keep).all() {
+                let centre = &mut self.sums[self.reach * side + self.reach];
+                for (s, v) in centre.iter_mut().zip(&values) {
+                    *s += *v;
+                }
+                centre[C] += Lanes::select(keep, Lanes::splat(1.0), zero);
+                return;
+            }
+        }
+        let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
+        filter.eval_span_lanes(self.x - reach, px, &mut wx[..side]);
+        filter.eval_span_lanes(self.y - reach, py, &mut wy[..side]);
+        for w in &mut wx[..side] {
+            *w = Lanes::select(keep, *w, zero);
+        }
+        for (row, ey) in self.sums[..side * side].chunks_exact_mut(side).zip(&wy) {
+            for (sums, ex) in row.iter_mut().zip(&wx) {
+                let w = *ey * *ex;
+                for (s, v) in sums.iter_mut().zip(&values) {
+                    *s += w * *v;
+                }
+                sums[C] += w;
+            }
+        }
+    }
+
+    /// Adds the pixel's sums to `block` (the pixels of the window within
+    /// it), `C` channels as [`PixelSplat::add`] had them.
+    #[inline(always)]
+    pub fn flush<const C: usize>(&self, block: &mut ImageBlock) {
+        debug_assert_eq!(C, block.channels);
+        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let stride = C + 1;
+        for (dj, row) in self.sums[..side * side].chunks_exact(side).enumerate() {
+            let j = self.y - reach + dj as i64 - block.y0;
+            if !(0..block.height as i64).contains(&j) {
+                continue;
+            }
+            for (di, sums) in row.iter().enumerate() {
+                let i = self.x - reach + di as i64 - block.x0;
+                if !(0..block.width as i64).contains(&i) {
+                    continue;
+                }
+                let o = (j as usize * block.width + i as usize) * stride;
+                let pixel = &mut block.data[o..o + stride];
+                for (acc, s) in pixel.iter_mut().zip(sums) {
+                    *acc += lane_sum::<N>(|k| s.0[k] as f64);
+                }
+            }
+        }
+    }
+}
+
+/// [`AdjointImage::gather`] for the samples of one pixel, `N` at a time:
+/// the adjoint values of the window the filter reaches from the pixel
+/// read once ([`PixelGather::start`]), each block's weights and sums in
+/// lanes.
+pub struct PixelGather {
+    x: i64,
+    y: i64,
+    reach: usize,
+    /// Per pixel of the window, row by row: the adjoint image's RGB (zero
+    /// outside the crop window).
+    values: [[f32; 3]; WINDOW],
+}
+
+impl PixelGather {
+    /// A gather for `filter`, if its window is small enough.
+    pub fn new(filter: &ReconstructionFilter) -> Option<PixelGather> {
+        Some(PixelGather {
+            x: 0,
+            y: 0,
+            reach: window_reach(filter)?,
+            values: [[0.0; 3]; WINDOW],
+        })
+    }
+
+    /// Reads the window of pixel `(x, y)` from `image`.
+    #[inline(always)]
+    pub fn start(&mut self, image: &AdjointImage, x: i64, y: i64) {
+        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let (x0, y0, width, height) = image.bounds;
+        (self.x, self.y) = (x, y);
+        for (dj, row) in self.values[..side * side]
+            .chunks_exact_mut(side)
+            .enumerate()
+        {
+            let j = y - reach + dj as i64 - y0;
+            for (di, v) in row.iter_mut().enumerate() {
+                let i = x - reach + di as i64 - x0;
+                let inside = (0..height).contains(&j) && (0..width).contains(&i);
+                *v = if inside {
+                    image.data[(j * width + i) as usize]
+                } else {
+                    [0.0; 3]
+                };
+            }
+        }
+    }
+
+    /// `AdjointImage::gather` of the samples at `(px[k], py[k])`, in this
+    /// pixel: the RGB derivatives of the loss with respect to their
+    /// values.
+    #[inline(always)]
+    pub fn gather<const N: usize>(
+        &self,
+        filter: &ReconstructionFilter,
+        px: Lanes<N>,
+        py: Lanes<N>,
+    ) -> [Lanes<N>; 3] {
+        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let zero = Lanes::splat(0.0);
+        let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
+        filter.eval_span_lanes(self.x - reach, px, &mut wx[..side]);
+        filter.eval_span_lanes(self.y - reach, py, &mut wy[..side]);
+        let mut out = [zero; 3];
+        for (row, ey) in self.values[..side * side].chunks_exact(side).zip(&wy) {
+            let mut along = [zero; 3];
+            for (v, ex) in row.iter().zip(&wx) {
+                for (a, v) in along.iter_mut().zip(v) {
+                    *a += *ex * *v;
+                }
+            }
+            for (o, a) in out.iter_mut().zip(along) {
+                *o += *ey * a;
+            }
+        }
+        out
+    }
+}
+
 /// `f(0) + … + f(N − 1)` summed pairwise (halves, then quarters, …), so
 /// that the additions of each step are independent and run as vector
 /// instructions; `N` a power of two.
@@ -525,16 +613,10 @@ mod tests {
         }
     }
 
-    /// `put_lanes` adds what `put` adds for each kept sample, for every
-    /// filter: samples inside a pixel and on its borders (its own edges
-    /// x and x + 1, which a rounded `x + u` can reach), pixels at and
-    /// beyond the block's edges (the footprints clipped), lanes left out
-    /// (one of them NaN), and lanes all kept or all left out. The sums
-    /// differ only in the order of their additions (each product is exact
-    /// in f64), so they agree to 1e-12.
-    #[test]
-    fn lanes_splat_as_samples_one_by_one() {
-        let filters = [
+    /// The filters of the lanes' tests: every kind, a narrow Gaussian
+    /// (its window a single pixel) and the default one.
+    fn window_filters() -> [ReconstructionFilter; 6] {
+        [
             ReconstructionFilter::Box,
             ReconstructionFilter::Tent { radius: 1.5 },
             ReconstructionFilter::gaussian(0.5),
@@ -544,49 +626,135 @@ mod tests {
                 c: 1.0 / 3.0,
             },
             ReconstructionFilter::Lanczos { lobes: 3.0 },
-        ];
-        let mut state = 7u32;
+        ]
+    }
+
+    /// Positions in pixel (x, y) for 8 lanes: uniform (a PCG step per
+    /// number), or (`case` 1) on the pixel's borders, its own edges x and
+    /// x + 1 included (which a rounded `x + u` can reach).
+    fn lane_positions(x: i64, y: i64, case: u32, state: &mut u32) -> (Lanes<8>, Lanes<8>) {
         let mut uniform = || {
-            state = state.wrapping_mul(747796405).wrapping_add(2891336453);
-            (state >> 8) as f32 / (1u32 << 24) as f32
+            *state = state.wrapping_mul(747796405).wrapping_add(2891336453);
+            (*state >> 8) as f32 / (1u32 << 24) as f32
         };
-        for f in &filters {
+        let offsets: [(f32, f32); 8] = std::array::from_fn(|k| match (case, k) {
+            (1, 0) => (0.0, 0.5),
+            (1, 1) => (1.0, 0.3),
+            (1, 2) => (0.0, 0.0),
+            (1, 3) => (0.4, 1.0),
+            _ => (uniform(), uniform()),
+        });
+        (
+            Lanes::from_fn(|k| x as f32 + offsets[k].0),
+            Lanes::from_fn(|k| y as f32 + offsets[k].1),
+        )
+    }
+
+    /// A pixel's samples through `PixelSplat`, two blocks of 8 lanes,
+    /// add what `put` adds for each kept sample, for every filter:
+    /// samples inside a pixel and on its borders, pixels at and beyond the
+    /// block's edges (the window clipped), lanes left out (NaN values), all
+    /// kept or all left out. The window sums each lane's weighted values in
+    /// f32 and takes the weights from `eval_span_lanes` (within 100 ε of
+    /// `eval`, its test), so a pixel's sum may differ from the f64 sum of
+    /// `put` by a few hundred ε of the sum of its terms' magnitudes.
+    #[test]
+    fn pixel_splat_adds_what_samples_one_by_one_add() {
+        let mut state = 7u32;
+        for f in &window_filters() {
+            let splat = PixelSplat::<8>::new(f);
+            let mut splat = splat.expect("a window up to three pixels on each side");
             for (x, y) in [(2, 2), (-1, 0), (4, 4), (-3, 1), (1, 6)] {
                 for case in 0..4 {
-                    let offsets: [(f32, f32); 8] = std::array::from_fn(|k| match (case, k) {
-                        (1, 0) => (0.0, 0.5),
-                        (1, 1) => (1.0, 0.3),
-                        (1, 2) => (0.0, 0.0),
-                        (1, 3) => (0.4, 1.0),
-                        _ => (uniform(), uniform()),
-                    });
-                    let keep: [bool; 8] = std::array::from_fn(|k| match case {
-                        2 => true,
-                        3 => false,
-                        _ => k % 3 != 1,
-                    });
-                    let px = offsets.map(|o| x as f32 + o.0);
-                    let py = offsets.map(|o| y as f32 + o.1);
-                    let values: [[f32; 8]; 3] = std::array::from_fn(|c| {
-                        std::array::from_fn(|k| {
-                            if keep[k] {
-                                1.0 + c as f32 + uniform()
-                            } else {
-                                f32::NAN
-                            }
-                        })
-                    });
-                    let mut lanes = ImageBlock::new(-1, 0, 6, 5, 3);
-                    lanes.put_lanes(f, px, py, values, keep);
+                    let mut window = ImageBlock::new(-1, 0, 6, 5, 3);
                     let mut one_by_one = ImageBlock::new(-1, 0, 6, 5, 3);
-                    for k in (0..8).filter(|&k| keep[k]) {
-                        one_by_one.put(f, px[k], py[k], &values.map(|v| v[k]));
+                    let mut magnitudes = vec![0.0f64; 6 * 5 * 4];
+                    splat.start(x, y);
+                    for block in 0..2 {
+                        let (px, py) = lane_positions(x, y, case + block, &mut state);
+                        let keep = LaneMask::<8>::from_fn(|k| match case {
+                            2 => true,
+                            3 => false,
+                            _ => k % 3 != 1,
+                        });
+                        let values: [Lanes<8>; 3] = std::array::from_fn(|c| {
+                            Lanes::from_fn(|k| {
+                                if keep.lane(k) {
+                                    1.0 + c as f32 + (k as f32 * 0.37).fract()
+                                } else {
+                                    f32::NAN
+                                }
+                            })
+                        });
+                        splat.add(f, px, py, values, keep);
+                        for k in (0..8).filter(|&k| keep.lane(k)) {
+                            let v = values.map(|v| v.0[k]);
+                            one_by_one.put(f, px.0[k], py.0[k], &v);
+                            // the sums of |w| · |v| (and of |w|)
+                            let bounds = (-1, 0, 6, 5);
+                            ImageBlock::footprint_in(bounds, f, px.0[k], py.0[k], |i, j, w| {
+                                let o = (j as usize * 6 + (i + 1) as usize) * 4;
+                                for (c, v) in v.iter().chain(&[1.0]).enumerate() {
+                                    magnitudes[o + c] += (w * *v as f64).abs();
+                                }
+                            });
+                        }
                     }
-                    for (i, (a, b)) in lanes.data.iter().zip(&one_by_one.data).enumerate() {
+                    splat.flush::<3>(&mut window);
+                    let sums = window.data.iter().zip(&one_by_one.data).zip(&magnitudes);
+                    for (i, ((a, b), m)) in sums.enumerate() {
                         assert!(
-                            (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                            (a - b).abs() <= 300.0 * f32::EPSILON as f64 * m,
                             "{f:?}, pixel ({x}, {y}), case {case}, value {i}: {a} vs {b}"
                         );
+                    }
+                }
+            }
+        }
+        // wider filters have no window: the loops splat sample by sample
+        assert!(PixelSplat::<8>::new(&ReconstructionFilter::gaussian(1.3)).is_none());
+        assert!(PixelGather::new(&ReconstructionFilter::Lanczos { lobes: 4.0 }).is_none());
+    }
+
+    /// `PixelGather` gives each lane what `AdjointImage::gather` gives its
+    /// sample, for every filter, pixels at and beyond the crop window's
+    /// edges among them (to the weights' precision, as above).
+    #[test]
+    fn pixel_gather_gathers_what_samples_one_by_one_gather() {
+        let (w, h) = (6usize, 5usize);
+        let mut weights = ImageBlock::new(0, 0, w, h, 0);
+        weights
+            .data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, v)| *v = 0.5 + i as f64);
+        let d_image: Vec<f32> = (0..w * h * 3)
+            .map(|i| ((i * 7) % 11) as f32 - 5.0)
+            .collect();
+        let adjoint = weights.adjoint_image(&d_image);
+        let mut state = 3u32;
+        for f in &window_filters() {
+            let mut window = PixelGather::new(f).expect("a window up to three pixels");
+            for (x, y) in [(2, 2), (0, 0), (5, 4), (-1, 1), (3, 5)] {
+                window.start(&adjoint, x, y);
+                for case in 0..2 {
+                    let (px, py) = lane_positions(x, y, case, &mut state);
+                    let got = window.gather(f, px, py);
+                    for k in 0..8 {
+                        let want = adjoint.gather(f, px.0[k], py.0[k]);
+                        let mut magnitude = 0.0f32;
+                        ImageBlock::footprint_in(adjoint.bounds, f, px.0[k], py.0[k], |i, j, w| {
+                            let a = adjoint.data[(j * 6 + i) as usize];
+                            magnitude += a.iter().map(|a| (w as f32 * a).abs()).sum::<f32>();
+                        });
+                        for c in 0..3 {
+                            assert!(
+                                (got[c].0[k] - want[c]).abs() <= 300.0 * f32::EPSILON * magnitude,
+                                "{f:?}, pixel ({x}, {y}), lane {k}: {} vs {}",
+                                got[c].0[k],
+                                want[c]
+                            );
+                        }
                     }
                 }
             }

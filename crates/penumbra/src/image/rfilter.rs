@@ -2,6 +2,8 @@
 //! splatted to every pixel whose centre lies within the filter radius,
 //! weighted by the separable filter; each pixel is the weighted mean.
 
+use crate::ad::lanes::Lanes;
+use crate::ad::{Float, Real};
 use crate::error::Result;
 use crate::scene::Node;
 
@@ -171,6 +173,66 @@ impl ReconstructionFilter {
         }
     }
 
+    /// [`ReconstructionFilter::eval_span`] for `N` positions at once, one
+    /// `Lanes` per pixel of `out` (lane k seen from `c.0[k]`): the
+    /// Gaussian's recurrence, the box and the tent in lanes, the cubic and
+    /// the sinc lane by lane. Unlike `eval_span`'s callers, which ask only
+    /// for the pixels within the radius, the window of [`PixelSplat`]
+    /// (`crate::image::film`) asks for the pixels within ⌊r + 0.5⌋ of the
+    /// samples' pixel, some past the radius, where the weights are zero.
+    /// On such a window the Gaussian's terms stay within f32's normal
+    /// range: the offsets are at most ⌊r + 0.5⌋ + 0.5 ≤ 4σ + 1, so that
+    /// |αx²| ≤ (4 + 1/σ)² / 2 ≤ 72 and the ratios' |α(2x + 1)| ≤ 64 for
+    /// σ ≥ 1/8 (no term is made past the last pixel), and
+    /// a smaller σ reaches no neighbour (a window of one pixel, the
+    /// recurrence's ratio not used).
+    ///
+    /// [`PixelSplat`]: crate::image::film::PixelSplat
+    #[inline(always)]
+    pub fn eval_span_lanes<const N: usize>(&self, first: i64, c: Lanes<N>, out: &mut [Lanes<N>]) {
+        let zero = Lanes::splat(0.0);
+        let x0 = Lanes::splat(first as f32 + 0.5) - c;
+        match self {
+            ReconstructionFilter::Box => {
+                let mut x = x0;
+                for o in out.iter_mut() {
+                    *o = Lanes::select(x.abs().le(0.5), Lanes::splat(1.0), zero);
+                    x += Lanes::splat(1.0);
+                }
+            }
+            ReconstructionFilter::Tent { radius } => {
+                let mut x = x0;
+                for o in out.iter_mut() {
+                    *o = (Lanes::splat(1.0) - x.abs() * (1.0 / radius)).max(zero);
+                    x += Lanes::splat(1.0);
+                }
+            }
+            ReconstructionFilter::Gaussian {
+                stddev, cut, step, ..
+            } => {
+                let alpha = -1.0 / (2.0 * stddev * stddev);
+                let mut g = (x0 * x0 * alpha).exp();
+                let mut ratio = ((x0 * 2.0 + 1.0) * alpha).exp();
+                // each term made just before its pixel, none past the last
+                // (whose exponents would leave f32's normal range)
+                for (d, o) in out.iter_mut().enumerate() {
+                    if d >= 2 {
+                        ratio *= Lanes::splat(*step);
+                    }
+                    if d >= 1 {
+                        g *= ratio;
+                    }
+                    *o = (g - *cut).max(zero);
+                }
+            }
+            _ => {
+                for (d, o) in out.iter_mut().enumerate() {
+                    *o = Lanes::from_fn(|k| self.eval(x0.0[k] + d as f32));
+                }
+            }
+        }
+    }
+
     /// Pixels (beyond a sample's own) that one sample can reach on each
     /// side: `ceil(radius - 0.5)`.
     pub fn border(&self) -> usize {
@@ -281,6 +343,53 @@ mod tests {
                             "{f:?} at pixel {at}: {v} against {want}"
                         ),
                         _ => assert_eq!(v.to_bits(), want.to_bits(), "{f:?} at pixel {at}"),
+                    }
+                }
+            }
+        }
+    }
+
+    /// `eval_span_lanes` gives `eval`'s values in each lane over the
+    /// window of pixels a sample of pixel x reaches (x ± ⌊r + 0.5⌋, also
+    /// past the radius: zero there), for samples anywhere in the pixel,
+    /// its edges included: the Gaussian to `eval_span`'s precision (above),
+    /// the others to the rounding of the offset (made from the first
+    /// pixel's by adding whole pixels, where `eval` takes each pixel's
+    /// own), a few ε of the value's scale.
+    #[test]
+    fn eval_span_lanes_equals_eval() {
+        let filters = [
+            ReconstructionFilter::Box,
+            ReconstructionFilter::Tent { radius: 1.5 },
+            ReconstructionFilter::gaussian(0.5),
+            ReconstructionFilter::gaussian(0.125),
+            ReconstructionFilter::gaussian(0.1),
+            ReconstructionFilter::gaussian(0.8),
+            ReconstructionFilter::Mitchell { b: 0.0, c: 0.5 },
+            ReconstructionFilter::Lanczos { lobes: 3.0 },
+        ];
+        for f in &filters {
+            let reach = (f.radius() + 0.5).floor() as i64;
+            for x in [-3i64, 0, 253] {
+                let c =
+                    Lanes([0.37f32, 0.0, 0.5, 0.999, 1.0, 0.01, 0.75, 0.2].map(|u| x as f32 + u));
+                let mut out = [Lanes::<8>::splat(0.0); 7];
+                let out = &mut out[..(2 * reach + 1) as usize];
+                f.eval_span_lanes(x - reach, c, out);
+                for (d, v) in out.iter().enumerate() {
+                    let at = x - reach + d as i64;
+                    for k in 0..8 {
+                        let want = f.eval(at as f32 + 0.5 - c.0[k]);
+                        let scale = match f {
+                            ReconstructionFilter::Gaussian { cut, .. } => 100.0 * (want + cut),
+                            _ => 8.0 * (1.0 + want.abs()),
+                        };
+                        assert!(
+                            (v.0[k] - want).abs() <= scale * f32::EPSILON,
+                            "{f:?} at pixel {at} from {}: {} against {want}",
+                            c.0[k],
+                            v.0[k]
+                        );
                     }
                 }
             }

@@ -41,6 +41,7 @@ use crate::emitter::{point_light_sample, surface_si, Constant, Emitter, EmitterT
 use crate::error::{Error, Result};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::{Hit, Ray, Shape, ShapeT, SurfacePoint};
+use crate::image::film::PixelSplat;
 use crate::image::ImageBlock;
 use crate::math::{Frame, Spectrum, V2, V3};
 use crate::params::ParamView;
@@ -634,8 +635,13 @@ impl<'a> LanePath<'a> {
         // reached a surface
         let mut radiance = [Vec3::ZERO; PACKET];
         let mut reached = [false; PACKET];
+        // (filters wider than a splat's window take `ImageBlock::put`)
+        let mut splat = PixelSplat::<N>::new(filter);
         for y in tile.y0..tile.y0 + tile.h {
             for x in tile.x0..tile.x0 + tile.w {
+                if let Some(splat) = &mut splat {
+                    splat.start(x, y);
+                }
                 let mut first = 0;
                 while first < layout.spp {
                     self.camera_group(layout, x, y, first, &mut group);
@@ -661,20 +667,30 @@ impl<'a> LanePath<'a> {
                         let l: V3<Lanes<N>> = lanes3(|k| radiance[at + k]);
                         let hit: [bool; N] = each_lane(|k| reached[at + k]);
                         // samples with a non-finite value are left out
-                        let finite = l.x.finite() & l.y.finite() & l.z.finite();
-                        let keep = each_lane(|k| active.lane(k) && finite.lane(k));
-                        non_finite += (0..N).filter(|&k| active.lane(k) && !keep[k]).count();
-                        let px = each_lane(|k| pos[at + k].x);
-                        let py = each_lane(|k| pos[at + k].y);
-                        let rgb = [l.x.0, l.y.0, l.z.0];
-                        if alpha {
-                            let a = each_lane(|k| if hit[k] { 1.0 } else { 0.0 });
-                            let [r, g, b] = rgb;
-                            block.put_lanes(filter, px, py, [r, g, b, a], keep);
-                        } else {
-                            block.put_lanes(filter, px, py, rgb, keep);
+                        let keep = active & l.x.finite() & l.y.finite() & l.z.finite();
+                        non_finite += (0..N).filter(|&k| active.lane(k) && !keep.lane(k)).count();
+                        let px = Lanes::<N>::from_fn(|k| pos[at + k].x);
+                        let py = Lanes::<N>::from_fn(|k| pos[at + k].y);
+                        let a = Lanes::<N>::from_fn(|k| if hit[k] { 1.0 } else { 0.0 });
+                        match &mut splat {
+                            Some(splat) if alpha => {
+                                splat.add(filter, px, py, [l.x, l.y, l.z, a], keep);
+                            }
+                            Some(splat) => splat.add(filter, px, py, [l.x, l.y, l.z], keep),
+                            None => {
+                                for k in (0..N).filter(|&k| keep.lane(k)) {
+                                    let v = [l.x.0[k], l.y.0[k], l.z.0[k], a.0[k]];
+                                    let channels = if alpha { 4 } else { 3 };
+                                    block.put(filter, px.0[k], py.0[k], &v[..channels]);
+                                }
+                            }
                         }
                     }
+                }
+                match &splat {
+                    Some(splat) if alpha => splat.flush::<4>(block),
+                    Some(splat) => splat.flush::<3>(block),
+                    None => {}
                 }
             }
         }
