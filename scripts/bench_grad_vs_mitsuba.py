@@ -20,7 +20,10 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
      cache (HOME pointed at a fresh folder, so Dr.Jit finds no ~/.drjit):
      the first run of a job on a machine. The other run uses the cache as
      it is, so once a job has run on this machine its first call compiles
-     nothing (the table gives the cache's files at its start).
+     nothing (the table gives the cache's files at its start). Penumbra
+     renders a copy of the job's scene whose integrator is `prb`, as
+     Mitsuba's side (`as_prb`): the scenes name `path`, whose Russian
+     roulette starts a vertex earlier.
   2. Peak RSS of `penumbra grad` (reverse, cbox 128², 64 spp; or the
      density grid of volume_hetero, 32 spp, with --memory volume_hetero) for
      max_depth 2..64: the local tape holds one path at a time, so memory
@@ -73,6 +76,60 @@ def penumbra(exe, args):
     if out.returncode:
         raise SystemExit(out.stderr)
     return last_json(out.stdout)
+
+
+def as_prb(args, made):
+    """`args` with the scene (their first) replaced by a copy whose integrator
+    is `prb` where it was `path`, written beside it so that its relative
+    paths hold, and its name added to `made`. Mitsuba's side runs `prb`,
+    whose Russian roulette starts one vertex later than `path`'s (Penumbra
+    starts it where each plugin does, see README's integrators), so that
+    both sides trace the same paths."""
+    scene = os.path.join(ROOT, args[0])
+    with open(scene) as f:
+        xml = f.read()
+    if '<integrator type="path"' not in xml:
+        return args
+    base, name = os.path.split(scene)
+    copy = os.path.join(base, f'.prb_{name}')
+    with open(copy, 'w') as f:
+        f.write(xml.replace('<integrator type="path"', '<integrator type="prb"', 1))
+    made.append(copy)
+    return [os.path.relpath(copy, ROOT), *args[1:]]
+
+
+def run_jobs(a, exe, jobs, spp, env, made):
+    """Times each of `a.jobs` on both sides and prints its row."""
+    r = str(a.reps)
+    for name in a.jobs:
+        args = as_prb(jobs[name], made)
+        ours = penumbra(exe, args)
+        if a.no_mitsuba:
+            mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
+                  'warm_ratio': (float('nan'),) * 3,
+                  'drjit_cache_files_at_start': '-', 'llvm_vector_width': '-'}
+            cold = {'first_s': float('nan')}
+            by_lanes = [float('nan')] * len(a.mitsuba_lanes)
+        else:
+            def mitsuba(reps, run_env, lanes=()):
+                out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
+                                      '--spp', spp.get(name, '64'), '--reps', reps, *lanes],
+                                     capture_output=True, text=True, env=run_env)
+                return last_json(out.stdout, 'RESULT ')
+            mi = mitsuba(r, env)
+            alternate(lambda: penumbra(exe, args), lambda: mitsuba(r, env), (ours, mi), a.rounds)
+            with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
+                cold = mitsuba('1', dict(env, HOME=cold_home))
+            by_lanes = [mitsuba(r, env, ['--lanes', str(n)])['warm_median_s']
+                        for n in a.mitsuba_lanes]
+        print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
+              f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
+              f'| {mi["warm_median_s"]:.3f} ({mi["llvm_vector_width"]}) '
+              f'| {mi["warm_ratio"][0]:.2f} ({mi["warm_ratio"][1]:.2f}–{mi["warm_ratio"][2]:.2f}) '
+              f'| {cold["first_s"] / ours["first_s"]:.2f} '
+              f'| {mi["first_s"] / ours["first_s"]:.2f}'
+              + ''.join(f' | {t:.3f} | {t / ours["warm_median_s"]:.2f}' for t in by_lanes)
+              + ' |', flush=True)
 
 
 def peak_rss_mb(exe, args):
@@ -146,35 +203,12 @@ def main():
           '| Mitsuba warm / Penumbra warm | Mitsuba first, empty cache / Penumbra first '
           f'| Mitsuba first / Penumbra first{lanes_heads} |')
     print('|---' * (9 + 2 * len(a.mitsuba_lanes)) + '|')
-    for name in a.jobs:
-        args = jobs[name]
-        ours = penumbra(exe, args)
-        if a.no_mitsuba:
-            mi = {'first_s': float('nan'), 'warm_median_s': float('nan'),
-                  'warm_ratio': (float('nan'),) * 3,
-                  'drjit_cache_files_at_start': '-', 'llvm_vector_width': '-'}
-            cold = {'first_s': float('nan')}
-            by_lanes = [float('nan')] * len(a.mitsuba_lanes)
-        else:
-            def mitsuba(reps, run_env, lanes=()):
-                out = subprocess.run([a.mitsuba_python, MITSUBA_BENCH, name,
-                                      '--spp', spp.get(name, '64'), '--reps', reps, *lanes],
-                                     capture_output=True, text=True, env=run_env)
-                return last_json(out.stdout, 'RESULT ')
-            mi = mitsuba(r, env)
-            alternate(lambda: penumbra(exe, args), lambda: mitsuba(r, env), (ours, mi), a.rounds)
-            with tempfile.TemporaryDirectory(prefix='drjit-cold-') as cold_home:
-                cold = mitsuba('1', dict(env, HOME=cold_home))
-            by_lanes = [mitsuba(r, env, ['--lanes', str(n)])['warm_median_s']
-                        for n in a.mitsuba_lanes]
-        print(f'| {name} | {ours["first_s"]:.3f} | {ours["warm_median_s"]:.3f} '
-              f'| {cold["first_s"]:.3f} | {mi["first_s"]:.3f} ({mi["drjit_cache_files_at_start"]}) '
-              f'| {mi["warm_median_s"]:.3f} ({mi["llvm_vector_width"]}) '
-              f'| {mi["warm_ratio"][0]:.2f} ({mi["warm_ratio"][1]:.2f}–{mi["warm_ratio"][2]:.2f}) '
-              f'| {cold["first_s"] / ours["first_s"]:.2f} '
-              f'| {mi["first_s"] / ours["first_s"]:.2f}'
-              + ''.join(f' | {t:.3f} | {t / ours["warm_median_s"]:.2f}' for t in by_lanes)
-              + ' |', flush=True)
+    made = []
+    try:
+        run_jobs(a, exe, jobs, spp, env, made)
+    finally:
+        for copy in made:
+            os.remove(copy)
     memory = {
         'cbox': ('cbox 128², 64 spp', ['scenes/cbox.xml', '--param', 'red.reflectance.value',
                                         '--init', '0.4', '--target', 'scenes/refs/cbox_target128.exr',

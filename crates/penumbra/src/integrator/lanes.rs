@@ -1104,9 +1104,13 @@ impl<'a> LanePath<'a> {
             throughput = throughput.mul_elem(weight);
             eta *= eta_wo;
             let (survives, q) =
-                survival_probability(throughput.max_elem(), eta, depth, path.rr_depth, u_rr);
-            let survival = if depth >= path.rr_depth { one / q } else { one };
-            if depth >= path.rr_depth {
+                survival_probability(throughput.max_elem(), eta, depth, path.roulette_from, u_rr);
+            let survival = if depth >= path.roulette_from {
+                one / q
+            } else {
+                one
+            };
+            if depth >= path.roulette_from {
                 throughput *= survival;
             }
             alive = alive & sampled & survives;

@@ -14,7 +14,7 @@ pub use aov::{AovIntegrator, AovKind};
 pub use budgets::Budgets;
 pub use direct::DirectIntegrator;
 pub use moment::MomentIntegrator;
-pub use path::PathIntegrator;
+pub use path::{PathIntegrator, RouletteCount};
 pub use render::{render, ProgressFn, RenderOptions, Rendered};
 pub use volpath::VolPathIntegrator;
 
@@ -48,13 +48,28 @@ pub enum Integrator {
 impl Integrator {
     pub fn from_node(node: &Node) -> Result<Integrator> {
         let i = match node.plugin.as_str() {
-            "path" => Integrator::Path(PathIntegrator::from_node(node, -1, Budgets::default())?),
-            "prb" | "prb_basic" => {
-                Integrator::Path(PathIntegrator::from_node(node, 6, Budgets::default())?)
-            }
+            "path" => Integrator::Path(PathIntegrator::from_node(
+                node,
+                -1,
+                RouletteCount::FromOne,
+                Budgets::default(),
+            )?),
+            "prb" => Integrator::Path(PathIntegrator::from_node(
+                node,
+                6,
+                RouletteCount::FromZero,
+                Budgets::default(),
+            )?),
+            "prb_basic" => Integrator::Path(PathIntegrator::from_node(
+                node,
+                6,
+                RouletteCount::Never,
+                Budgets::default(),
+            )?),
             "prb_projective" => Integrator::Path(PathIntegrator::from_node(
                 node,
                 6,
+                RouletteCount::FromZero,
                 Budgets::from_projective_node(node)?,
             )?),
             "direct" => Integrator::Direct(DirectIntegrator::from_node(node)?),
@@ -550,5 +565,36 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Russian roulette starts where the Mitsuba plugin the scene names
+    /// starts it: `path` counts the first vertex (0 here) as depth 1,
+    /// `prb` and `prb_projective` as 0, `prb_basic` plays none; a scene
+    /// without an integrator gets `path`'s.
+    #[test]
+    fn roulette_starts_where_mitsubas_plugin_starts_it() {
+        let cases = [
+            ("path", 5, 4),
+            ("path", 1, 0),
+            ("prb", 5, 5),
+            ("prb_projective", 3, 3),
+            ("prb_basic", 5, u32::MAX),
+        ];
+        for (plugin, rr_depth, from) in cases {
+            let integrator = format!(
+                r#"<integrator type="{plugin}"><integer name="rr_depth" value="{rr_depth}"/></integrator>"#
+            );
+            let xml = SCENE.replace("INTEGRATOR", &integrator);
+            let scene = Scene::load_str(&xml, Path::new("test.xml"), &[]).unwrap();
+            let Integrator::Path(p) = &scene.integrator else {
+                panic!("{plugin}: a path tracer");
+            };
+            assert_eq!((p.rr_depth, p.roulette_from), (rr_depth, from), "{plugin}");
+        }
+        let scene = Scene::load_str(&SCENE.replace("INTEGRATOR", ""), Path::new("t.xml"), &[]);
+        let Integrator::Path(p) = &scene.unwrap().integrator else {
+            panic!("the default integrator is a path tracer");
+        };
+        assert_eq!((p.max_depth, p.rr_depth, p.roulette_from), (u32::MAX, 5, 4));
     }
 }

@@ -22,26 +22,69 @@ pub struct PathIntegrator {
     /// Longest path, in vertices (1: only directly visible emitters);
     /// `u32::MAX` for unbounded (`max_depth = -1`).
     pub max_depth: u32,
-    /// Depth from which Russian roulette may end paths.
+    /// Mitsuba's `rr_depth`, as the scene gives it.
     pub rr_depth: u32,
+    /// The first vertex (0: where the camera ray lands) at which Russian
+    /// roulette may end a path, from `rr_depth` as the plugin counts it
+    /// ([`RouletteCount`]); `u32::MAX` for none.
+    pub roulette_from: u32,
     /// Directly visible emitters are not shown.
     pub hide_emitters: bool,
     /// Sample budgets of the derivative passes (`prb_projective`).
     pub budgets: Budgets,
 }
 
+/// How one of Mitsuba's path tracers counts the depth it compares with
+/// `rr_depth`, which decides the first vertex where Russian roulette may
+/// end a path. Roulette changes no expected value, but a path that goes
+/// one vertex further costs a bounce and a shadow ray more: counted as
+/// Mitsuba counts it, a scene's render does the work Mitsuba's does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RouletteCount {
+    /// Mitsuba's `path` (C++): the vertex just reached counts from 1 when
+    /// roulette is decided there, so it starts at vertex `rr_depth − 1`
+    /// (`rr_depth = 1`: "may cease after encountering directly visible
+    /// surfaces", as its documentation has it).
+    FromOne,
+    /// `prb` and `prb_projective` (Python): the vertex counts from 0, so
+    /// roulette starts at vertex `rr_depth`.
+    FromZero,
+    /// `prb_basic`: no roulette.
+    Never,
+}
+
 impl PathIntegrator {
+    /// Mitsuba's `path` with `max_depth` and `rr_depth`, no budgets.
+    pub fn new(max_depth: u32, rr_depth: u32, hide_emitters: bool) -> PathIntegrator {
+        PathIntegrator {
+            max_depth,
+            rr_depth,
+            roulette_from: rr_depth - 1,
+            hide_emitters,
+            budgets: Budgets::default(),
+        }
+    }
+
     /// The settings of `node`, with `max_depth` defaulting to
-    /// `default_max_depth` (Mitsuba's `path`: -1, its `prb*`: 6) and the
-    /// derivative `budgets` read by the caller.
+    /// `default_max_depth` (Mitsuba's `path`: -1, its `prb*`: 6), the
+    /// plugin's count of `rr_depth`, and the derivative `budgets` read by
+    /// the caller.
     pub(crate) fn from_node(
         node: &Node,
         default_max_depth: i64,
+        count: RouletteCount,
         budgets: Budgets,
     ) -> Result<PathIntegrator> {
+        // (at least 1: `int_min`)
+        let rr_depth = node.int_min("rr_depth", 5, 1)? as u32;
         Ok(PathIntegrator {
             max_depth: super::max_depth(node, default_max_depth)?,
-            rr_depth: node.int_min("rr_depth", 5, 1)? as u32,
+            rr_depth,
+            roulette_from: match count {
+                RouletteCount::FromOne => rr_depth - 1,
+                RouletteCount::FromZero => rr_depth,
+                RouletteCount::Never => u32::MAX,
+            },
             hide_emitters: node.bool("hide_emitters", false)?,
             budgets,
         })
@@ -197,7 +240,7 @@ impl PathIntegrator {
                 throughput.val() * bs.weight.val(),
                 eta,
                 depth,
-                self.rr_depth,
+                self.roulette_from,
                 rng,
             ) else {
                 return result;

@@ -445,12 +445,12 @@ impl Scene {
             environment: b.environment,
             sensors: b.sensors,
             media: b.media,
-            integrator: b.integrator.unwrap_or(Integrator::Path(PathIntegrator {
-                max_depth: u32::MAX,
-                rr_depth: 5,
-                hide_emitters: false,
-                budgets: Default::default(),
-            })),
+            // Mitsuba's default: `path`, unbounded, roulette from depth 5
+            integrator: b.integrator.unwrap_or(Integrator::Path(PathIntegrator::new(
+                u32::MAX,
+                5,
+                false,
+            ))),
             accel,
         })
     }
