@@ -94,7 +94,8 @@ def as_prb(args, made):
     copy = os.path.join(base, f'.prb_{name}')
     with open(copy, 'w') as f:
         f.write(xml.replace('<integrator type="path"', '<integrator type="prb"', 1))
-    made.append(copy)
+    if copy not in made:
+        made.append(copy)
     return [os.path.relpath(copy, ROOT), *args[1:]]
 
 
