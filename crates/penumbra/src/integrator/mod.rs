@@ -570,7 +570,8 @@ mod tests {
     /// Russian roulette starts where the Mitsuba plugin the scene names
     /// starts it: `path` counts the first vertex (0 here) as depth 1,
     /// `prb` and `prb_projective` as 0, `prb_basic` plays none; a scene
-    /// without an integrator gets `path`'s.
+    /// without an integrator gets `path`'s; `volpath` and `prbvolpath`
+    /// once the scattering events exceed `rr_depth`.
     #[test]
     fn roulette_starts_where_mitsubas_plugin_starts_it() {
         let cases = [
@@ -596,5 +597,16 @@ mod tests {
             panic!("the default integrator is a path tracer");
         };
         assert_eq!((p.max_depth, p.rr_depth, p.roulette_from), (u32::MAX, 5, 4));
+        for plugin in ["volpath", "prbvolpath"] {
+            let integrator = format!(
+                r#"<integrator type="{plugin}"><integer name="rr_depth" value="3"/></integrator>"#
+            );
+            let xml = SCENE.replace("INTEGRATOR", &integrator);
+            let scene = Scene::load_str(&xml, Path::new("test.xml"), &[]).unwrap();
+            let Integrator::VolPath(v) = &scene.integrator else {
+                panic!("{plugin}: a volumetric path tracer");
+            };
+            assert_eq!(v.roulette_from(), 4, "{plugin}");
+        }
     }
 }

@@ -43,8 +43,8 @@ pub struct PathIntegrator {
 pub enum RouletteCount {
     /// Mitsuba's `path` (C++): the vertex just reached counts from 1 when
     /// roulette is decided there, so it starts at vertex `rr_depth − 1`
-    /// (`rr_depth = 1`: "may cease after encountering directly visible
-    /// surfaces", as its documentation has it).
+    /// (with `rr_depth = 1` a path may end at the first surface it sees,
+    /// as its documentation describes).
     FromOne,
     /// `prb` and `prb_projective` (Python): the vertex counts from 0, so
     /// roulette starts at vertex `rr_depth`.

@@ -52,7 +52,8 @@ pub struct VolPathIntegrator {
     /// Longest path, in scattering vertices (surface or medium) plus one,
     /// as Mitsuba counts; `u32::MAX` for unbounded.
     pub max_depth: u32,
-    /// Depth from which Russian roulette may end paths.
+    /// Mitsuba's `rr_depth`: Russian roulette may end a path once its
+    /// scattering events exceed it ([`VolPathIntegrator::roulette_from`]).
     pub rr_depth: u32,
     /// Directly visible emitters are not shown.
     pub hide_emitters: bool,
@@ -71,6 +72,14 @@ struct LastScatter {
 }
 
 impl VolPathIntegrator {
+    /// The count of scattering events from which Russian roulette may end
+    /// a path: Mitsuba's `volpath` and `prbvolpath` play it where the
+    /// events so far exceed `rr_depth` (compared with `>`, where its `path`
+    /// compares with `>=`).
+    pub(crate) fn roulette_from(&self) -> u32 {
+        self.rr_depth.saturating_add(1)
+    }
+
     pub(crate) fn from_node(node: &Node, default_max_depth: i64) -> Result<VolPathIntegrator> {
         Ok(VolPathIntegrator {
             max_depth: super::max_depth(node, default_max_depth)?,
@@ -160,7 +169,13 @@ impl VolPathIntegrator {
                             delta: !m.sample_emitters,
                         };
                         // the roulette first: a path it ends traces no ray
-                        if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
+                        if !survives_roulette(
+                            &mut throughput,
+                            eta,
+                            depth,
+                            self.roulette_from(),
+                            rng,
+                        ) {
                             return result;
                         }
                         ray = Ray::new(p, wo);
@@ -272,7 +287,7 @@ impl VolPathIntegrator {
                     delta: bs.lobe.has(BsdfFlags::DELTA),
                 };
             }
-            if !survives_roulette(&mut throughput, eta, depth, self.rr_depth, rng) {
+            if !survives_roulette(&mut throughput, eta, depth, self.roulette_from(), rng) {
                 return result;
             }
             ray = si.spawn_ray(d);
