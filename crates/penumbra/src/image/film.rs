@@ -428,7 +428,10 @@ impl<const N: usize> PixelSplat<N> {
         let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
         filter.eval_span_lanes(self.x - reach, px, &mut wx[..side]);
         filter.eval_span_lanes(self.y - reach, py, &mut wy[..side]);
-        for w in &mut wx[..side] {
+        // both zero in the lanes left out, whose positions may lie far
+        // from the pixel: no weight of theirs reaches the sums, whatever
+        // a filter computes there
+        for w in wx[..side].iter_mut().chain(&mut wy[..side]) {
             *w = Lanes::select(keep, *w, zero);
         }
         for (row, ey) in self.sums[..side * side].chunks_exact_mut(side).zip(&wy) {
@@ -653,7 +656,8 @@ mod tests {
     /// A pixel's samples through `PixelSplat`, two blocks of 8 lanes,
     /// add what `put` adds for each kept sample, for every filter:
     /// samples inside a pixel and on its borders, pixels at and beyond the
-    /// block's edges (the window clipped), lanes left out (NaN values), all
+    /// block's edges (the window clipped), lanes left out (NaN values,
+    /// positions far from the pixel), all
     /// kept or all left out. The window sums each lane's weighted values in
     /// f32 and takes the weights from `eval_span_lanes` (within 100 ε of
     /// `eval`, its test), so a pixel's sum may differ from the f64 sum of
@@ -661,6 +665,7 @@ mod tests {
     #[test]
     fn pixel_splat_adds_what_samples_one_by_one_add() {
         let mut state = 7u32;
+        let zero = Lanes::<8>::splat(0.0);
         for f in &window_filters() {
             let splat = PixelSplat::<8>::new(f);
             let mut splat = splat.expect("a window up to three pixels on each side");
@@ -677,6 +682,9 @@ mod tests {
                             3 => false,
                             _ => k % 3 != 1,
                         });
+                        // a lane left out may hold a position far away
+                        let far = Lanes::select(keep, zero, Lanes::splat(1e4));
+                        let (px, py) = (px + far, py + far);
                         let values: [Lanes<8>; 3] = std::array::from_fn(|c| {
                             Lanes::from_fn(|k| {
                                 if keep.lane(k) {
