@@ -8,6 +8,9 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
        grad_rev_mixed  reverse mode, dL2/d ground.reflectance (bsdfs, 0.3 grey:
                        a diffuse ground among rough conductor, dielectric
                        and plastic spheres)
+       grad_rev_rough  reverse mode, dL2/d conductor.bsdf.alpha (bsdfs, 0.3: a
+                       roughness, which reverse mode in lanes does not take,
+                       so Penumbra replays its paths on the tape)
        grad_rev_light  reverse mode, dL2/d light.emitter.radiance (cbox, 10 grey)
        grad_rev_point  reverse mode, dL2/d bulb.intensity (cbox_point: cbox with
                        a point light beside its area light; 2 grey)
@@ -30,7 +33,7 @@ run, and the peak memory of Penumbra's reverse mode against path depth.
      should not grow with depth.
 
   python3 scripts/bench_grad_vs_mitsuba.py [--reps 3] [--no-mitsuba]
-      [--jobs grad_rev_bsdf grad_rev_tex grad_rev_mixed grad_rev_light grad_rev_point
+      [--jobs grad_rev_bsdf grad_rev_tex grad_rev_mixed grad_rev_rough grad_rev_light grad_rev_point
               grad_fwd_albedo vol_hetero_rev]
       [--memory cbox|volume_hetero] [--rounds 3] [--exe PATH] [--mitsuba-lanes N [N ...]]
 
@@ -150,8 +153,8 @@ def main():
     ap.add_argument('--rounds', type=int, default=3,
                     help='warm times measured this many times per side, the sides alternating')
     ap.add_argument('--jobs', nargs='+',
-                    default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_rev_mixed', 'grad_rev_light',
-                             'grad_rev_point', 'grad_fwd_albedo'])
+                    default=['grad_rev_bsdf', 'grad_rev_tex', 'grad_rev_mixed', 'grad_rev_rough',
+                             'grad_rev_light', 'grad_rev_point', 'grad_fwd_albedo'])
     ap.add_argument('--memory', choices=['cbox', 'volume_hetero'], default='cbox')
     ap.add_argument('--mitsuba-python',
                     default=os.path.expanduser('~/.cache/penumbra-mitsuba/venv/bin/python'))
@@ -176,6 +179,10 @@ def main():
                          '-o', 'out/bench_grad'],
         'grad_rev_mixed': ['scenes/bsdfs.xml', '-D', 'res=128', '--param',
                            'ground.bsdf.reflectance.value', '--init', '0.3', '--target',
+                           'scenes/refs/bsdfs_target128.exr', '--spp', '64', '--reps', r,
+                           '-o', 'out/bench_grad'],
+        'grad_rev_rough': ['scenes/bsdfs.xml', '-D', 'res=128', '--param',
+                           'conductor.bsdf.alpha.value', '--init', '0.3', '--target',
                            'scenes/refs/bsdfs_target128.exr', '--spp', '64', '--reps', r,
                            '-o', 'out/bench_grad'],
         'grad_rev_light': ['scenes/cbox.xml', '-D', 'res=128', '--param',

@@ -16,6 +16,7 @@ Tasks (see README.md for the exact definition of each):
   grad_rev_bsdf reverse-mode dL2/d(red.reflectance) on cbox with prb
   grad_rev_tex  reverse-mode dL2/d(plane texture) on textured with prb
   grad_rev_mixed reverse-mode dL2/d(ground.reflectance) on bsdfs (mixed BSDFs), prb
+  grad_rev_rough reverse-mode dL2/d(conductor.bsdf.alpha) on bsdfs (a roughness), prb
   grad_rev_light reverse-mode dL2/d(light.emitter.radiance) on cbox with prb
   grad_rev_point reverse-mode dL2/d(bulb.intensity) on cbox_point with prb
   grad_fwd_albedo forward-mode d image / d(scale of red.reflectance) on cbox, prb
@@ -201,6 +202,26 @@ def task_grad_rev_mixed(a):
     spheres, whose parameters are not differentiated)."""
     return _reverse_color(a, 'bsdfs', 'ground.bsdf.reflectance.value', 0.3,
                           [0.5, 0.5, 0.5])
+
+
+def task_grad_rev_rough(a):
+    """Reverse mode by a roughness: dL2/d(conductor.bsdf.alpha) on bsdfs
+    (the rough conductor's GGX alpha, set to 0.3; prb, depth 8)."""
+    mi, dr = C.setup('llvm_ad_rgb')
+    scene, load_s = C.load_scene('bsdfs', res=GRAD_RES)
+    target = get_target('bsdfs', GRAD_RES, scene)
+    integ = mi.load_dict({'type': 'prb', 'max_depth': 8})
+    params = mi.traverse(scene)
+    key, init = 'conductor.bsdf.alpha.value', 0.3
+    params[key] = mi.Float(init)
+    params.update()
+    t, outs = _reverse(scene, params, [key], integ, target, a.spp, a.reps, a.extra)
+    g = np.array([float(np.ravel(o[0][0])[0]) for o in outs])
+    return dict(t, load_s=load_s, param=key, init=init, true=0.2,
+                loss='mean over pixels & channels of (img - target)^2',
+                grad_per_call=g.tolist(), grad_mean=float(g.mean()),
+                grad_std=float(g.std(ddof=1)), loss_per_call=[o[1] for o in outs],
+                res=GRAD_RES)
 
 
 def task_grad_rev_light(a):

@@ -341,14 +341,63 @@ const WINDOW: usize = (2 * MAX_REACH + 1) * (2 * MAX_REACH + 1);
 /// Channels a [`PixelSplat`] sums (RGB and alpha).
 const MAX_CHANNELS: usize = 4;
 
-/// How far `filter` reaches from a sample's own pixel, where that fits a
-/// window of [`MAX_REACH`]: a sample in pixel x (at a position in `[x,
-/// x + 1]`, the end included for rounding) reaches the pixels whose
-/// centres are within the radius r, `ceil(x − 0.5 − r) ≥ x − ⌊r + 0.5⌋`
-/// to `floor(x + 0.5 + r) = x + ⌊r + 0.5⌋`.
-fn window_reach(filter: &ReconstructionFilter) -> Option<usize> {
-    let reach = (filter.radius() + 0.5).floor();
-    (reach <= MAX_REACH as f32).then_some(reach as usize)
+/// The pixels a filter reaches from the samples of one pixel: a square
+/// of side `2 reach + 1` about it, where that fits [`MAX_REACH`]. Shared
+/// by [`PixelSplat`] and [`PixelGather`].
+#[derive(Clone, Copy)]
+struct PixelWindow {
+    x: i64,
+    y: i64,
+    reach: usize,
+}
+
+/// Per pixel column and row of a window, each lane's filter weight.
+type SpanWeights<const N: usize> = ([Lanes<N>; 2 * MAX_REACH + 1], [Lanes<N>; 2 * MAX_REACH + 1]);
+
+impl PixelWindow {
+    /// The window of `filter`, if it fits: a sample in pixel x (at a
+    /// position in `[x, x + 1]`, the end included for rounding) reaches the
+    /// pixels whose centres are within the radius r, `ceil(x − 0.5 − r) ≥
+    /// x − ⌊r + 0.5⌋` to `floor(x + 0.5 + r) = x + ⌊r + 0.5⌋`.
+    fn new(filter: &ReconstructionFilter) -> Option<PixelWindow> {
+        let reach = (filter.radius() + 0.5).floor();
+        (reach <= MAX_REACH as f32).then_some(PixelWindow {
+            x: 0,
+            y: 0,
+            reach: reach as usize,
+        })
+    }
+
+    /// Pixels along a side.
+    #[inline(always)]
+    fn side(&self) -> usize {
+        2 * self.reach + 1
+    }
+
+    /// The window's first column and row.
+    #[inline(always)]
+    fn origin(&self) -> (i64, i64) {
+        let reach = self.reach as i64;
+        (self.x - reach, self.y - reach)
+    }
+
+    /// The filter's weights of the samples at `(px[k], py[k])` (in this
+    /// pixel) per column and row of the window, the first
+    /// [`PixelWindow::side`] of each.
+    #[inline(always)]
+    fn weights<const N: usize>(
+        &self,
+        filter: &ReconstructionFilter,
+        px: Lanes<N>,
+        py: Lanes<N>,
+    ) -> SpanWeights<N> {
+        let (side, (x0, y0)) = (self.side(), self.origin());
+        let zero = Lanes::splat(0.0);
+        let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
+        filter.eval_span_lanes(x0, px, &mut wx[..side]);
+        filter.eval_span_lanes(y0, py, &mut wy[..side]);
+        (wx, wy)
+    }
 }
 
 /// The samples of one pixel splatted `N` at a time (the path tracer in
@@ -361,9 +410,7 @@ fn window_reach(filter: &ReconstructionFilter) -> Option<usize> {
 /// sum over the lanes (13 % of cbox's lane kernel with its Gaussian
 /// filter).
 pub struct PixelSplat<const N: usize> {
-    x: i64,
-    y: i64,
-    reach: usize,
+    window: PixelWindow,
     /// Per pixel of the window, row by row: the sums of the channels'
     /// weighted values, then of the weights.
     sums: [[Lanes<N>; MAX_CHANNELS + 1]; WINDOW],
@@ -373,9 +420,7 @@ impl<const N: usize> PixelSplat<N> {
     /// A splat for `filter`, if its window is small enough.
     pub fn new(filter: &ReconstructionFilter) -> Option<PixelSplat<N>> {
         Some(PixelSplat {
-            x: 0,
-            y: 0,
-            reach: window_reach(filter)?,
+            window: PixelWindow::new(filter)?,
             sums: [[Lanes::splat(0.0); MAX_CHANNELS + 1]; WINDOW],
         })
     }
@@ -384,8 +429,8 @@ impl<const N: usize> PixelSplat<N> {
     /// pixel's [`PixelSplat::flush`]).
     #[inline(always)]
     pub fn start(&mut self, x: i64, y: i64) {
-        let side = 2 * self.reach + 1;
-        (self.x, self.y) = (x, y);
+        let side = self.window.side();
+        (self.window.x, self.window.y) = (x, y);
         for s in &mut self.sums[..side * side] {
             *s = [Lanes::splat(0.0); MAX_CHANNELS + 1];
         }
@@ -404,20 +449,21 @@ impl<const N: usize> PixelSplat<N> {
         keep: LaneMask<N>,
     ) {
         const { assert!(C <= MAX_CHANNELS) };
+        let PixelWindow { x, y, reach } = self.window;
         debug_assert!((0..N).all(|k| !keep.lane(k)
-            || ((self.x as f32..=self.x as f32 + 1.0).contains(&px.0[k])
-                && (self.y as f32..=self.y as f32 + 1.0).contains(&py.0[k]))));
-        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+            || ((x as f32..=x as f32 + 1.0).contains(&px.0[k])
+                && (y as f32..=y as f32 + 1.0).contains(&py.0[k]))));
+        let side = self.window.side();
         let zero = Lanes::splat(0.0);
         let values = values.map(|v| Lanes::select(keep, v, zero));
         if let ReconstructionFilter::Box = filter {
             // samples strictly inside the pixel (all of them, nearly
             // always) reach it alone, with weight one: as `footprint_in`
             // has it, without the window's weights
-            let (x, y) = (self.x as f32, self.y as f32);
+            let (x, y) = (x as f32, y as f32);
             let inside = px.gt(x) & px.lt(x + 1.0) & py.gt(y) & py.lt(y + 1.0);
             if (inside | !keep).all() {
-                let centre = &mut self.sums[self.reach * side + self.reach];
+                let centre = &mut self.sums[reach * side + reach];
                 for (s, v) in centre.iter_mut().zip(&values) {
                     *s += *v;
                 }
@@ -425,9 +471,7 @@ impl<const N: usize> PixelSplat<N> {
                 return;
             }
         }
-        let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
-        filter.eval_span_lanes(self.x - reach, px, &mut wx[..side]);
-        filter.eval_span_lanes(self.y - reach, py, &mut wy[..side]);
+        let (mut wx, mut wy) = self.window.weights(filter, px, py);
         // both zero in the lanes left out, whose positions may lie far
         // from the pixel: no weight of theirs reaches the sums, whatever
         // a filter computes there
@@ -450,15 +494,15 @@ impl<const N: usize> PixelSplat<N> {
     #[inline(always)]
     pub fn flush<const C: usize>(&self, block: &mut ImageBlock) {
         debug_assert_eq!(C, block.channels);
-        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let (side, (x0, y0)) = (self.window.side(), self.window.origin());
         let stride = C + 1;
         for (dj, row) in self.sums[..side * side].chunks_exact(side).enumerate() {
-            let j = self.y - reach + dj as i64 - block.y0;
+            let j = y0 + dj as i64 - block.y0;
             if !(0..block.height as i64).contains(&j) {
                 continue;
             }
             for (di, sums) in row.iter().enumerate() {
-                let i = self.x - reach + di as i64 - block.x0;
+                let i = x0 + di as i64 - block.x0;
                 if !(0..block.width as i64).contains(&i) {
                     continue;
                 }
@@ -477,9 +521,7 @@ impl<const N: usize> PixelSplat<N> {
 /// read once ([`PixelGather::start`]), each block's weights and sums in
 /// lanes.
 pub struct PixelGather {
-    x: i64,
-    y: i64,
-    reach: usize,
+    window: PixelWindow,
     /// Per pixel of the window, row by row: the adjoint image's RGB (zero
     /// outside the crop window).
     values: [[f32; 3]; WINDOW],
@@ -489,9 +531,7 @@ impl PixelGather {
     /// A gather for `filter`, if its window is small enough.
     pub fn new(filter: &ReconstructionFilter) -> Option<PixelGather> {
         Some(PixelGather {
-            x: 0,
-            y: 0,
-            reach: window_reach(filter)?,
+            window: PixelWindow::new(filter)?,
             values: [[0.0; 3]; WINDOW],
         })
     }
@@ -499,16 +539,16 @@ impl PixelGather {
     /// Reads the window of pixel `(x, y)` from `image`.
     #[inline(always)]
     pub fn start(&mut self, image: &AdjointImage, x: i64, y: i64) {
-        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        (self.window.x, self.window.y) = (x, y);
+        let (side, (wx0, wy0)) = (self.window.side(), self.window.origin());
         let (x0, y0, width, height) = image.bounds;
-        (self.x, self.y) = (x, y);
         for (dj, row) in self.values[..side * side]
             .chunks_exact_mut(side)
             .enumerate()
         {
-            let j = y - reach + dj as i64 - y0;
+            let j = wy0 + dj as i64 - y0;
             for (di, v) in row.iter_mut().enumerate() {
-                let i = x - reach + di as i64 - x0;
+                let i = wx0 + di as i64 - x0;
                 let inside = (0..height).contains(&j) && (0..width).contains(&i);
                 *v = if inside {
                     image.data[(j * width + i) as usize]
@@ -529,11 +569,9 @@ impl PixelGather {
         px: Lanes<N>,
         py: Lanes<N>,
     ) -> [Lanes<N>; 3] {
-        let (reach, side) = (self.reach as i64, 2 * self.reach + 1);
+        let side = self.window.side();
         let zero = Lanes::splat(0.0);
-        let (mut wx, mut wy) = ([zero; 2 * MAX_REACH + 1], [zero; 2 * MAX_REACH + 1]);
-        filter.eval_span_lanes(self.x - reach, px, &mut wx[..side]);
-        filter.eval_span_lanes(self.y - reach, py, &mut wy[..side]);
+        let (wx, wy) = self.window.weights(filter, px, py);
         let mut out = [zero; 3];
         for (row, ey) in self.values[..side * side].chunks_exact(side).zip(&wy) {
             let mut along = [zero; 3];
