@@ -922,6 +922,33 @@ impl<'a> LanePath<'a> {
             let others = mixed.then(|| MixedLanes::new(&bsdf_of, albedo, wi));
             let bsdf = BsdfLanes::new(others.as_ref(), albedo, wi);
 
+            // The vertex's random numbers, in the order of the scalar loop
+            // (the light sample's, then the BSDF sample's and the
+            // roulette's), and the BSDF sample with its world direction,
+            // all before the light sample is looked at: the sample's chain
+            // (the warp's division, polynomial and square roots, the
+            // frame, the normalisation) then runs beside the light
+            // sample's work instead of after it, where the bounce ray
+            // waited on it. (A lane whose path ended draws nothing: its
+            // stream is its own and is not read again.)
+            let zeros = || Lanes::<N>::splat(0.0);
+            let mut u_light = [Vec2::ZERO; N];
+            let (mut u1, mut u2, mut u_rr) = (zeros(), V2::new(zeros(), zeros()), zeros());
+            let draws_light = scene.emitter_distribution.is_some();
+            for (k, rng) in rngs.iter_mut().enumerate() {
+                if alive.lane(k) {
+                    if draws_light {
+                        u_light[k] = rng.next_2d();
+                    }
+                    u1.0[k] = rng.next_1d();
+                    let u = rng.next_2d();
+                    (u2.x.0[k], u2.y.0[k]) = (u.x, u.y);
+                    u_rr.0[k] = rng.next_1d();
+                }
+            }
+            let (wo_bsdf, pdf_bsdf, weight_bsdf, eta_wo, sampled) = bsdf.sample(u1, u2);
+            let d_bsdf = frame.to_world(wo_bsdf).normalize();
+
             // next-event estimation: a lane that picks a mesh's area
             // light samples its point there, and the direction, density
             // and weight follow in lanes (as `Area::sample_direction`);
@@ -942,13 +969,11 @@ impl<'a> LanePath<'a> {
             let (mut o_d, mut o_pdf, mut o_w) = ([Vec3::ZERO; N], [0.0; N], [Vec3::ZERO; N]);
             let (mut o_delta, mut o_far, mut o_end) = ([false; N], [false; N], [Vec3::ZERO; N]);
             if let Some(dist) = &scene.emitter_distribution {
-                // (a lane whose path ended draws nothing: its stream is
-                // its own and is not read again)
                 for k in 0..N {
                     if !alive.lane(k) {
                         continue;
                     }
-                    let u = rngs[k].next_2d();
+                    let u = u_light[k];
                     let (em, em_pick, ux) = dist.sample_reuse(u.x);
                     match self.lights[em] {
                         LaneLight::Mesh(light) => {
@@ -1086,22 +1111,10 @@ impl<'a> LanePath<'a> {
                 });
             }
 
-            // continue the paths by BSDF sampling, then Russian roulette
+            // continue the paths by the BSDF sample, then Russian roulette
             // on the throughput after the bounce (as the scalar loop)
-            let mut u1 = Lanes::<N>::splat(0.0);
-            let mut u2 = V2::new(Lanes::splat(0.0), Lanes::<N>::splat(0.0));
-            let mut u_rr = Lanes::<N>::splat(0.0);
-            for (k, rng) in rngs.iter_mut().enumerate() {
-                if alive.lane(k) {
-                    u1.0[k] = rng.next_1d();
-                    let u = rng.next_2d();
-                    (u2.x.0[k], u2.y.0[k]) = (u.x, u.y);
-                    u_rr.0[k] = rng.next_1d();
-                }
-            }
-            let (wo, pdf, weight, eta_wo, sampled) = bsdf.sample(u1, u2);
             let reached = throughput;
-            throughput = throughput.mul_elem(weight);
+            throughput = throughput.mul_elem(weight_bsdf);
             eta *= eta_wo;
             let (survives, q) =
                 survival_probability(throughput.max_elem(), eta, depth, path.roulette_from, u_rr);
@@ -1114,28 +1127,32 @@ impl<'a> LanePath<'a> {
                 throughput *= survival;
             }
             alive = alive & sampled & survives;
-            log.bounce(depth, reached, weight, Lanes::select(alive, survival, zero));
+            log.bounce(
+                depth,
+                reached,
+                weight_bsdf,
+                Lanes::select(alive, survival, zero),
+            );
             if alive.none() {
                 break;
             }
             // a path that ended carries nothing (its throughput may be
             // infinite: divided by a survival probability of zero)
             throughput = V3::select(alive, throughput, V3::zero());
-            let d = frame.to_world(wo).normalize();
             // each hit is written where it is kept: through `then`, it
             // came back in a temporary, copied with wider loads than the
             // stores that had just written it, which waited on them (3 %
             // of cbox's kernel)
             for k in 0..N {
                 if alive.lane(k) {
-                    rays[k] = point(k).spawn_ray(lane3(d, k));
+                    rays[k] = point(k).spawn_ray(lane3(d_bsdf, k));
                     hits[k] = intersect(scene, &rays[k]);
                 } else {
                     hits[k] = None;
                 }
             }
             prev_p = p;
-            prev_pdf = pdf;
+            prev_pdf = pdf_bsdf;
             depth += 1;
         }
         (result, camera_hits)
