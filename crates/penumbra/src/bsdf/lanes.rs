@@ -131,6 +131,43 @@ impl<'a> LaneBsdf<'a> {
             _ => return None,
         })
     }
+
+    /// The parameters the lanes hold constant in a BSDF written for them
+    /// (all but its diffuse reflectance): a roughness, an index of
+    /// refraction, a specular factor. `None` where one is not a list of
+    /// parameters ([`Texture::param_ids`]).
+    pub(crate) fn held_params(bsdf: &Bsdf) -> Option<Vec<ParamId>> {
+        let ids = |textures: &[Option<&Texture>]| -> Option<Vec<ParamId>> {
+            let mut ids = Vec::new();
+            for texture in textures.iter().flatten() {
+                ids.extend(texture.param_ids()?);
+            }
+            Some(ids)
+        };
+        Some(match bsdf {
+            Bsdf::RoughConductor(c) => ids(&[
+                Some(&c.roughness.alpha_u),
+                Some(&c.ior.eta),
+                Some(&c.ior.k),
+                c.specular_reflectance.as_ref(),
+            ])?,
+            Bsdf::RoughDielectric(d) => {
+                let mut held = ids(&[
+                    Some(&d.roughness.alpha_u),
+                    d.specular_reflectance.as_ref(),
+                    d.specular_transmittance.as_ref(),
+                ])?;
+                held.push(d.eta);
+                held
+            }
+            Bsdf::RoughPlastic(p) => {
+                let mut held = ids(&[p.specular_reflectance.as_ref()])?;
+                held.extend([p.alpha, p.eta]);
+                held
+            }
+            _ => Vec::new(),
+        })
+    }
 }
 
 /// Per lane, a sampled direction, its density, its weight, the relative

@@ -191,6 +191,27 @@ enum LaneLight<'a> {
     Other,
 }
 
+/// How the lanes' paths scatter at a vertex (world directions): the
+/// BSDF's value along the light sample's direction and along the bounce's
+/// is all a path's estimate reads of the BSDF's parameters (its samples
+/// are constants: detached sampling), so these and the factors they are
+/// weighted by give its derivatives by them (`diff/prb_lanes.rs`).
+#[derive(Clone, Copy)]
+pub(crate) struct Scattering<const N: usize> {
+    /// The shading normal, and the direction towards where the path came
+    /// from.
+    pub ns: V3<Lanes<N>>,
+    pub wi: V3<Lanes<N>>,
+    /// The light sample's direction, and its contribution per unit of the
+    /// throughput and of the BSDF's value (its weight and MIS weight; zero
+    /// where it is blocked or there is none).
+    pub light_d: V3<Lanes<N>>,
+    pub light_weight: V3<Lanes<N>>,
+    /// The bounce's direction and density.
+    pub bounce_d: V3<Lanes<N>>,
+    pub bounce_pdf: Lanes<N>,
+}
+
 /// What a caller of [`LanePath::trace`] learns of each path beyond its
 /// radiance, per depth (0: the vertex the camera ray reaches). Reverse
 /// mode in lanes (`diff/prb_lanes.rs`) keeps the factors of every
@@ -237,6 +258,12 @@ pub(crate) trait PathLog<const N: usize> {
         contribution: impl FnOnce() -> (V3<Lanes<N>>, V3<Lanes<N>>),
     ) {
         let _ = (depth, contribution);
+    }
+    /// The directions of the scattering at `depth`, for derivatives by
+    /// the parameters of the vertices' BSDFs ([`Scattering`]).
+    #[inline(always)]
+    fn scattering(&mut self, depth: u32, scattering: impl FnOnce() -> Scattering<N>) {
+        let _ = (depth, scattering);
     }
     /// The shadow rays `ray(k)` of the light samples in the lanes of
     /// `tried` at `depth`, whose contributions are `contribution()` where
@@ -1114,6 +1141,15 @@ impl<'a> LanePath<'a> {
                     )
                 });
             }
+
+            log.scattering(depth, || Scattering {
+                ns,
+                wi: -d,
+                light_d: d_em,
+                light_weight: V3::select(visible, weight * weigh().0, V3::zero()),
+                bounce_d: d_bsdf,
+                bounce_pdf: pdf_bsdf,
+            });
 
             // continue the paths by the BSDF sample, then Russian roulette
             // on the throughput after the bounce (as the scalar loop)
